@@ -1,0 +1,1 @@
+"""OpenMMLab mmdet3d plugins for multi-modal 3D semantic occupancy."""

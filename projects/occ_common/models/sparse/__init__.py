@@ -1,0 +1,1 @@
+"""sparse of the occupancy plugins."""

@@ -1,0 +1,122 @@
+"""A toy occupancy dataset and model for tests of the training tools.
+
+They exercise ``tools/train.py`` / ``tools/test.py``, checkpointing and
+resuming in seconds, independently of the real models. They are registered
+only when this module is imported (a test config lists it in
+``custom_imports``), never by ``import projects.occ_common``.
+"""
+from typing import List, Optional, Sequence, Tuple, Union
+
+import torch
+from mmdet3d.registry import DATASETS, MODELS
+from mmengine.dataset import BaseDataset
+from mmengine.model import BaseModel
+from mmengine.structures import BaseDataElement
+from torch import Tensor, nn
+
+
+@DATASETS.register_module()
+class ToyOccupancyDataset(BaseDataset):
+    """Random voxel grids whose class is readable from noisy features.
+
+    Sample ``i`` has a label grid drawn with seed ``seed + i`` and features
+    ``one_hot(label) + noise * randn``, so a 1x1x1 convolution can learn it.
+
+    Args:
+        num_samples (int): Number of samples. Defaults to 8.
+        grid_shape (tuple[int]): ``(X, Y, Z)``. Defaults to (8, 8, 4).
+        num_classes (int): Number of classes, 0 = empty. Defaults to 3.
+        noise (float): Feature noise. Defaults to 0.5.
+        seed (int): Base seed. Defaults to 0.
+    """
+
+    METAINFO = dict(classes=('empty', 'car', 'road'))
+
+    def __init__(self,
+                 num_samples: int = 8,
+                 grid_shape: Tuple[int, int, int] = (8, 8, 4),
+                 num_classes: int = 3,
+                 noise: float = 0.5,
+                 seed: int = 0,
+                 **kwargs) -> None:
+        self.num_samples = num_samples
+        self.grid_shape = tuple(grid_shape)
+        self.num_classes = num_classes
+        self.noise = noise
+        self.seed = seed
+        super().__init__(serialize_data=False, **kwargs)
+
+    def load_data_list(self) -> List[dict]:
+        """Generate every sample once, deterministically."""
+        data_list = []
+        for idx in range(self.num_samples):
+            gen = torch.Generator().manual_seed(self.seed + idx)
+            label = torch.randint(
+                0, self.num_classes, self.grid_shape, generator=gen)
+            feats = nn.functional.one_hot(label, self.num_classes).float()
+            feats = feats + self.noise * torch.randn(
+                feats.shape, generator=gen)
+            data_list.append(
+                dict(
+                    sample_idx=idx,
+                    inputs=feats.permute(3, 0, 1, 2).contiguous(),
+                    gt_occ=label))
+        return data_list
+
+    def prepare_data(self, idx: int) -> dict:
+        """Return ``dict(inputs, data_samples)`` as the pack transforms do."""
+        info = self.get_data_info(idx)
+        sample = BaseDataElement(
+            metainfo=dict(sample_idx=info['sample_idx']))
+        sample.gt_occ = info['gt_occ']
+        return dict(inputs=info['inputs'], data_samples=sample)
+
+
+@MODELS.register_module()
+class ToyOccupancyModel(BaseModel):
+    """A 1x1x1 convolution classifying every voxel.
+
+    Args:
+        in_channels (int): Feature channels. Defaults to 3.
+        num_classes (int): Number of classes. Defaults to 3.
+        data_preprocessor (dict, optional): Defaults to None.
+        init_cfg (dict, optional): Defaults to None.
+    """
+
+    def __init__(self,
+                 in_channels: int = 3,
+                 num_classes: int = 3,
+                 data_preprocessor: Optional[dict] = None,
+                 init_cfg: Optional[dict] = None) -> None:
+        super().__init__(
+            data_preprocessor=data_preprocessor, init_cfg=init_cfg)
+        self.classifier = nn.Conv3d(in_channels, num_classes, 1)
+
+    def forward(self,
+                inputs: Union[Tensor, Sequence[Tensor]],
+                data_samples: Optional[List[BaseDataElement]] = None,
+                mode: str = 'tensor'):
+        """Dispatch to ``loss`` / ``predict`` / ``_forward``.
+
+        Args:
+            inputs (Tensor | list[Tensor]): Shape (B, C, X, Y, Z), or a list
+                of (C, X, Y, Z) as the default collate gives.
+            data_samples (list[BaseDataElement], optional): Each with
+                ``gt_occ`` Shape (X, Y, Z).
+            mode (str): 'loss', 'predict' or 'tensor'.
+        """
+        if isinstance(inputs, (list, tuple)):
+            inputs = torch.stack(list(inputs))
+        logits = self.classifier(inputs)
+        if mode == 'tensor':
+            return logits
+        if mode == 'loss':
+            gt = torch.stack([s.gt_occ for s in data_samples])
+            return dict(loss_ce=nn.functional.cross_entropy(
+                logits, gt.to(logits.device)))
+        if mode == 'predict':
+            for sample, pred in zip(data_samples, logits.argmax(1)):
+                sample.pred_occ = pred
+            return data_samples
+        raise RuntimeError(f'Invalid mode "{mode}"; expected loss, predict '
+                           'or tensor.')

@@ -1,0 +1,1 @@
+"""occ_cyl plugin (being built)."""

@@ -1,0 +1,1 @@
+"""sdg_occ plugin (being built)."""

@@ -1,0 +1,4 @@
+"""Package setup; all metadata lives in setup.cfg."""
+from setuptools import setup
+
+setup()
