@@ -1,1 +1,14 @@
-"""evaluation of the occupancy plugins."""
+"""Evaluation (metrics) of the occupancy plugins.
+
+Importing this package registers ``OccupancyMetric`` in mmdet3d's
+``METRICS`` registry.
+"""
+from .occupancy_confusion import (confusion_matrix, geometric_iou, mean_iou,
+                                  per_class_iou)
+from .occupancy_metric import (OCC3D_CLASSES, SURROUNDOCC_CLASSES,
+                               OccupancyMetric)
+
+__all__ = [
+    'OCC3D_CLASSES', 'OccupancyMetric', 'SURROUNDOCC_CLASSES',
+    'confusion_matrix', 'geometric_iou', 'mean_iou', 'per_class_iou'
+]

@@ -1,0 +1,98 @@
+"""Softmax focal loss over occupancy voxels."""
+from typing import Optional, Sequence
+
+import torch
+import torch.nn as nn
+import torch.nn.functional as F
+from mmdet3d.registry import MODELS
+from torch import Tensor
+
+from .utils import check_labels, flatten_logits, zero_with_grad
+
+
+@MODELS.register_module()
+class OccFocalLoss(nn.Module):
+    """Multi-class (softmax) focal loss with an ignore label.
+
+    Implements eq. 5 of Lin et al., "Focal Loss for Dense Object Detection"
+    (ICCV 2017) over the softmax of C classes, with the class weight
+    :math:`w_c` in place of the scalar :math:`\\alpha`:
+
+    .. math::
+        L = \\frac{1}{|V|} \\sum_{i \\in V} -w_{y_i} (1 - p_{i,y_i})^\\gamma
+            \\log p_{i,y_i},
+
+    where V is the set of voxels whose label is not ``ignore_index``. The
+    sum is divided by the number of supervised voxels (not by the sum of
+    their weights), so the class weights rescale classes against each other
+    and the overall scale. With ``gamma=0`` and no weights this is the
+    cross-entropy. The inputs are never modified: ignored voxels are
+    excluded by a mask, not by overwriting their labels.
+
+    Args:
+        gamma (float): Focusing parameter. Defaults to 2.0.
+        class_weight (Sequence[float], optional): One weight per class.
+            Defaults to None (all ones).
+        ignore_index (int): Label of voxels without supervision.
+            Defaults to 255.
+        loss_weight (float): Factor applied to the loss. Defaults to 1.0.
+    """
+
+    def __init__(self,
+                 gamma: float = 2.0,
+                 class_weight: Optional[Sequence[float]] = None,
+                 ignore_index: int = 255,
+                 loss_weight: float = 1.0) -> None:
+        super().__init__()
+        if gamma < 0:
+            raise ValueError(f'OccFocalLoss: expected gamma >= 0, got '
+                             f'{gamma}.')
+        self.gamma = float(gamma)
+        self.class_weight = (None if class_weight is None else
+                             [float(w) for w in class_weight])
+        self.ignore_index = ignore_index
+        self.loss_weight = loss_weight
+
+    @property
+    def loss_name(self) -> str:
+        """Name of the term in a loss dict."""
+        return 'loss_focal'
+
+    def forward(self, logits: Tensor, target: Tensor) -> Tensor:
+        """Compute the loss.
+
+        Args:
+            logits (Tensor): Class scores before softmax.
+                Shape (B, C, X, Y, Z) or (N, C).
+            target (Tensor): Integer labels in ``[0, C)`` or
+                ``ignore_index``. Shape (B, X, Y, Z) or (N,).
+
+        Returns:
+            Tensor: Scalar loss; zero (with zero gradients) when every voxel
+            is ignored.
+        """
+        flat_logits, flat_target = flatten_logits(logits, target,
+                                                  'OccFocalLoss')
+        num_classes = flat_logits.shape[1]
+        if (self.class_weight is not None
+                and len(self.class_weight) != num_classes):
+            raise ValueError(
+                f'OccFocalLoss: expected {num_classes} class weights for '
+                f'logits with {num_classes} classes, got '
+                f'{len(self.class_weight)}.')
+        valid = check_labels(flat_target, num_classes, self.ignore_index,
+                             'OccFocalLoss')
+        if not bool(valid.any()):
+            return zero_with_grad(logits)
+        # Selecting rather than masking keeps ignored voxels out of the
+        # softmax gradient entirely.
+        scores = flat_logits[valid].float()
+        labels = flat_target[valid]
+        log_p = F.log_softmax(scores, dim=1).gather(1, labels[:, None])[:, 0]
+        p = log_p.exp()
+        loss = -((1.0 - p)**self.gamma) * log_p
+        if self.class_weight is not None:
+            weight = torch.tensor(
+                self.class_weight, dtype=loss.dtype, device=loss.device)
+            loss = loss * weight[labels]
+        return self.loss_weight * loss.mean()

@@ -1,0 +1,155 @@
+"""Lovasz-softmax loss over occupancy voxels.
+
+mmdet3d 1.4's registered ``LovaszLoss`` is not reused: its flattening
+unpacks exactly four axes, so logits of shape (B, C, X, Y, Z) raise a
+ValueError; a batch with a single supervised voxel loses its class axis
+(``squeeze`` of the index) and raises an IndexError; and an all-ignored
+batch returns an empty (0, C) tensor instead of a scalar. This module
+handles any number of spatial axes and returns a connected zero scalar for
+an all-ignored batch.
+"""
+from typing import List, Optional, Sequence, Union
+
+import torch
+import torch.nn as nn
+import torch.nn.functional as F
+from mmdet3d.registry import MODELS
+from torch import Tensor
+
+from .utils import check_labels, flatten_logits, zero_with_grad
+
+
+def lovasz_softmax_flat(probs: Tensor,
+                        labels: Tensor,
+                        classes: Union[str, Sequence[int]] = 'present',
+                        class_weight: Optional[Sequence[float]] = None
+                        ) -> Optional[Tensor]:
+    """Lovasz-softmax loss of supervised voxels, all classes at once.
+
+    Implements eq. 12 and Algorithm 1 of Berman et al., "The Lovasz-Softmax
+    loss" (CVPR 2018): for each class c the errors
+    :math:`m_i = |[y_i = c] - p_{i,c}|` are sorted in decreasing order and
+    dotted with the gradient of the Lovasz extension of the Jaccard loss,
+    :math:`g_k = J_k - J_{k-1}` with
+    :math:`J_k = 1 - |F_c \\setminus \\pi_{1..k}| / |F_c \\cup \\pi_{1..k}|`
+    (F_c the voxels of class c, :math:`\\pi_{1..k}` the k largest errors).
+
+    Args:
+        probs (Tensor): Softmax probabilities. Shape (N, C).
+        labels (Tensor): Labels in ``[0, C)``. Shape (N,).
+        classes (str | Sequence[int]): ``'present'`` averages over the
+            classes that occur in ``labels``, ``'all'`` over every class, or
+            an explicit list of class indices. Defaults to 'present'.
+        class_weight (Sequence[float], optional): Per-class factor applied
+            before averaging. Defaults to None.
+
+    Returns:
+        Tensor | None: Scalar loss, or None when no class is selected (no
+        supervised voxel with ``'present'``).
+    """
+    num_classes = probs.shape[1]
+    fg = F.one_hot(labels, num_classes).to(probs.dtype)
+    errors = (fg - probs).abs()
+    errors_sorted, order = torch.sort(errors, dim=0, descending=True)
+    with torch.no_grad():
+        fg_sorted = fg.gather(0, order)
+        total = fg.sum(0)
+        intersection = total - fg_sorted.cumsum(0)
+        # The union is >= 1 from the first voxel on: either the class has
+        # voxels (total >= 1) or the first sorted voxel is a non-member.
+        union = total + (1.0 - fg_sorted).cumsum(0)
+        jaccard = 1.0 - intersection / union
+        grad = torch.cat([jaccard[:1], jaccard[1:] - jaccard[:-1]], dim=0)
+    per_class = (errors_sorted * grad).sum(0)
+    if class_weight is not None:
+        per_class = per_class * per_class.new_tensor(list(class_weight))
+    if classes == 'present':
+        selected = total > 0
+    elif classes == 'all':
+        selected = torch.ones_like(total, dtype=torch.bool)
+    else:
+        selected = torch.zeros_like(total, dtype=torch.bool)
+        selected[list(classes)] = True
+    if not bool(selected.any()):
+        return None
+    return per_class[selected].mean()
+
+
+@MODELS.register_module()
+class OccLovaszLoss(nn.Module):
+    """Lovasz-softmax loss for logits with any number of spatial axes.
+
+    A surrogate of the per-class Jaccard index (Berman et al., CVPR 2018,
+    eq. 12), averaged over classes; all supervised voxels of the batch are
+    pooled (no per-sample averaging), as in the reference implementation.
+
+    Args:
+        classes (str | Sequence[int]): ``'present'``, ``'all'`` or a list
+            of class indices to average over. Defaults to 'present'.
+        class_weight (Sequence[float], optional): Per-class factor.
+            Defaults to None.
+        ignore_index (int): Label of voxels without supervision.
+            Defaults to 255.
+        loss_weight (float): Factor applied to the loss. Defaults to 1.0.
+    """
+
+    def __init__(self,
+                 classes: Union[str, Sequence[int]] = 'present',
+                 class_weight: Optional[Sequence[float]] = None,
+                 ignore_index: int = 255,
+                 loss_weight: float = 1.0) -> None:
+        super().__init__()
+        if isinstance(classes, str):
+            if classes not in ('present', 'all'):
+                raise ValueError("OccLovaszLoss: expected classes 'present',"
+                                 f" 'all' or a list of ints, got {classes!r}")
+        elif not all(isinstance(c, int) for c in classes):
+            raise ValueError('OccLovaszLoss: expected a list of int class '
+                             f'indices, got {classes!r}.')
+        self.classes: Union[str, List[int]] = (
+            classes if isinstance(classes, str) else list(classes))
+        self.class_weight = (None if class_weight is None else
+                             [float(w) for w in class_weight])
+        self.ignore_index = ignore_index
+        self.loss_weight = loss_weight
+
+    @property
+    def loss_name(self) -> str:
+        """Name of the term in a loss dict."""
+        return 'loss_lovasz'
+
+    def forward(self, logits: Tensor, target: Tensor) -> Tensor:
+        """Compute the loss.
+
+        Args:
+            logits (Tensor): Class scores before softmax.
+                Shape (B, C, X, Y, Z) or (N, C).
+            target (Tensor): Integer labels in ``[0, C)`` or
+                ``ignore_index``. Shape (B, X, Y, Z) or (N,).
+
+        Returns:
+            Tensor: Scalar loss; zero (with zero gradients) when no voxel
+            is supervised.
+        """
+        flat_logits, flat_target = flatten_logits(logits, target,
+                                                  'OccLovaszLoss')
+        num_classes = flat_logits.shape[1]
+        if (self.class_weight is not None
+                and len(self.class_weight) != num_classes):
+            raise ValueError(
+                f'OccLovaszLoss: expected {num_classes} class weights, got '
+                f'{len(self.class_weight)}.')
+        if not isinstance(self.classes, str) and any(
+                c < 0 or c >= num_classes for c in self.classes):
+            raise ValueError(f'OccLovaszLoss: classes {self.classes} out of '
+                             f'range for {num_classes} classes.')
+        valid = check_labels(flat_target, num_classes, self.ignore_index,
+                             'OccLovaszLoss')
+        if not bool(valid.any()):
+            return zero_with_grad(logits)
+        probs = F.softmax(flat_logits[valid].float(), dim=1)
+        loss = lovasz_softmax_flat(probs, flat_target[valid], self.classes,
+                                   self.class_weight)
+        if loss is None:
+            return zero_with_grad(logits)
+        return self.loss_weight * loss

@@ -1,0 +1,77 @@
+"""Input checks and flattening shared by the occupancy losses."""
+from typing import Tuple
+
+import torch
+from torch import Tensor
+
+
+def flatten_logits(logits: Tensor, target: Tensor,
+                   loss_name: str) -> Tuple[Tensor, Tensor]:
+    """Move the class axis last and flatten logits and labels.
+
+    Args:
+        logits (Tensor): Class scores. Shape (B, C, X, Y, Z), any number of
+            spatial axes, or (N, C).
+        target (Tensor): Integer labels. Shape (B, X, Y, Z) matching the
+            logits without the class axis, or (N,).
+        loss_name (str): Name of the calling loss, used in error messages.
+
+    Returns:
+        tuple[Tensor, Tensor]: Logits of shape (M, C) and labels of shape
+        (M,), where M is the number of voxels. Neither input is modified.
+
+    Raises:
+        ValueError: If the shapes do not match or the labels are not
+            integers.
+    """
+    if logits.dim() < 2:
+        raise ValueError(f'{loss_name}: expected logits of shape (N, C) or '
+                         f'(B, C, X, Y, Z), got {tuple(logits.shape)}.')
+    expected = (logits.shape[0], ) + tuple(logits.shape[2:])
+    if tuple(target.shape) != expected:
+        raise ValueError(f'{loss_name}: expected target of shape {expected} '
+                         f'for logits of shape {tuple(logits.shape)}, got '
+                         f'{tuple(target.shape)}.')
+    if target.dtype.is_floating_point or target.dtype == torch.bool:
+        raise ValueError(f'{loss_name}: expected an integer target, got '
+                         f'{target.dtype}.')
+    num_classes = logits.shape[1]
+    flat_logits = logits.movedim(1, -1).reshape(-1, num_classes)
+    return flat_logits, target.reshape(-1).long()
+
+
+def check_labels(target: Tensor, num_classes: int, ignore_index: int,
+                 loss_name: str) -> Tensor:
+    """Check that every label is a class index or ``ignore_index``.
+
+    Args:
+        target (Tensor): Integer labels, any shape.
+        num_classes (int): Number of classes C.
+        ignore_index (int): Label of voxels without supervision.
+        loss_name (str): Name of the calling loss, used in error messages.
+
+    Returns:
+        Tensor: Bool mask of the supervised voxels, same shape as target.
+
+    Raises:
+        ValueError: If a label is outside ``[0, C)`` and not the ignore
+            index.
+    """
+    valid = target != ignore_index
+    bad = valid & ((target < 0) | (target >= num_classes))
+    if bool(bad.any()):
+        found = torch.unique(target[bad]).tolist()
+        raise ValueError(f'{loss_name}: expected labels in [0, {num_classes})'
+                         f' or the ignore index {ignore_index}, found '
+                         f'{found[:10]}.')
+    return valid
+
+
+def zero_with_grad(tensor: Tensor) -> Tensor:
+    """A zero scalar that is still connected to ``tensor``'s graph.
+
+    Returning it for a batch without supervised voxels keeps ``backward``
+    valid (all gradients zero) under DDP, which expects every parameter
+    that produced the logits to receive a gradient.
+    """
+    return tensor.sum() * 0.0

@@ -1,0 +1,137 @@
+"""Tests of the majority-vote GT down-sampling and the multi-scale loss."""
+import math
+
+import pytest
+import torch
+
+from projects.occ_common.models.losses import (MultiScaleOccupancyLoss,
+                                               OccFocalLoss,
+                                               SceneClassAffinityLoss,
+                                               downsample_occupancy_gt)
+
+E, IGN = 0, 255  # empty, ignore
+
+
+def _grid_from_blocks(blocks, size=4, factor=2):
+    """Fill a (size,)*3 grid block by block; ``blocks[(i, j, k)]`` lists
+    the factor^3 labels of that block in (x, y, z) row-major order."""
+    grid = torch.zeros(size, size, size, dtype=torch.long)
+    for (i, j, k), labels in blocks.items():
+        grid[i * factor:(i + 1) * factor, j * factor:(j + 1) * factor,
+             k * factor:(k + 1) * factor] = torch.tensor(labels).reshape(
+                 factor, factor, factor)
+    return grid
+
+
+BLOCKS = {
+    (0, 0, 0): [E] * 8,                           # all empty -> 0
+    (0, 0, 1): [E] * 5 + [2, 2, 1],               # empty 5 votes lose -> 2
+    (0, 1, 0): [IGN] * 8,                         # all ignored -> 255
+    (0, 1, 1): [IGN] * 6 + [3, E],                # one object voxel -> 3
+    (1, 0, 0): [1, 1, 3, 3, E, E, E, E],          # tie 1 vs 3 -> 1
+    (1, 0, 1): [E] * 4 + [IGN] * 4,               # empty + ignored -> 0
+    (1, 1, 0): [4] * 8,                           # uniform -> 4
+    (1, 1, 1): [IGN] * 3 + [3, 3, 3, 1, 1],       # 3 beats 1 -> 3
+}
+EXPECTED = [[[0, 2], [255, 3]], [[1, 0], [4, 3]]]
+
+
+def test_downsample_majority_vote():
+    """Each 2^3 block of BLOCKS goes to the label in its comment:
+    occupied labels vote, empty wins only when nothing is occupied,
+    all-ignored stays 255, ties go to the smaller class index."""
+    grid = _grid_from_blocks(BLOCKS)
+    before = grid.clone()
+    out = downsample_occupancy_gt(grid[None], 2)
+    assert out.tolist() == [EXPECTED]
+    assert out.dtype == grid.dtype
+    assert torch.equal(grid, before)
+    assert downsample_occupancy_gt(grid, 2).tolist() == EXPECTED
+
+
+def test_downsample_occ3d_free_last():
+    """empty_index = 17: 'others' (0) is an occupied class and wins over
+    7 free voxels; an all-free block stays 17; factor 4 merges all."""
+    grid = torch.full((4, 4, 4), 17)
+    grid[0, 0, 0] = 0
+    out = downsample_occupancy_gt(grid, 2, empty_index=17)
+    expected = torch.full((2, 2, 2), 17)
+    expected[0, 0, 0] = 0
+    assert torch.equal(out, expected)
+    assert downsample_occupancy_gt(grid, 4, empty_index=17).tolist() == \
+        [[[0]]]
+
+
+def test_downsample_edge_cases():
+    """factor 1 copies; an all-ignored grid stays ignored; errors."""
+    grid = _grid_from_blocks(BLOCKS)
+    copy = downsample_occupancy_gt(grid, 1)
+    assert torch.equal(copy, grid) and copy is not grid
+    ignored = torch.full((1, 2, 2, 2), 255)
+    assert downsample_occupancy_gt(ignored, 2).tolist() == [[[[255]]]]
+    with pytest.raises(ValueError, match='multiple of factor=3'):
+        downsample_occupancy_gt(grid, 3)
+    with pytest.raises(ValueError, match='integer labels'):
+        downsample_occupancy_gt(grid.float(), 2)
+    with pytest.raises(ValueError, match='negative'):
+        downsample_occupancy_gt(grid - 1, 2)
+
+
+def test_multi_scale_hand_computed():
+    """Logits all 0 over C = 5 classes: p = 1/5 everywhere, so the focal
+    term of every supervised voxel is (4/5)^2 ln 5 = 0.64 * 1.6094379
+    = 1.0300403, whatever the label. Scale 0 (4^3 GT) averages it: 1.0300403;
+    scale 1 (the 2^3 voted GT, 7 supervised blocks) also averages to it
+    and is weighted 1/2: 0.5150201.
+    """
+    gt = _grid_from_blocks(BLOCKS)[None]
+    logits = [
+        torch.zeros(1, 5, 4, 4, 4, requires_grad=True),
+        torch.zeros(1, 5, 2, 2, 2, requires_grad=True)
+    ]
+    loss = MultiScaleOccupancyLoss(
+        losses=[dict(type='OccFocalLoss'),
+                dict(type='SceneClassAffinityLoss', mode='geo')],
+        num_scales=2)
+    terms = loss(logits, gt)
+    assert sorted(terms) == [
+        'loss_focal_s0', 'loss_focal_s1', 'loss_geo_scal_s0',
+        'loss_geo_scal_s1'
+    ]
+    per_voxel = 0.64 * math.log(5)
+    assert terms['loss_focal_s0'].item() == pytest.approx(per_voxel, 1e-6)
+    assert terms['loss_focal_s1'].item() == pytest.approx(
+        per_voxel / 2, 1e-6)
+    coarse = torch.tensor([EXPECTED])
+    assert terms['loss_geo_scal_s1'].item() == pytest.approx(
+        SceneClassAffinityLoss()(logits[1], coarse).item() / 2, 1e-6)
+    sum(terms.values()).backward()
+    assert all(torch.isfinite(x.grad).all() for x in logits)
+
+
+def test_multi_scale_all_ignored_is_finite():
+    """An all-ignored GT gives zero terms and zero gradients."""
+    gt = torch.full((1, 4, 4, 2), 255)
+    logits = [
+        torch.randn(1, 3, 4, 4, 2, requires_grad=True),
+        torch.randn(1, 3, 2, 2, 1, requires_grad=True)
+    ]
+    loss = MultiScaleOccupancyLoss([OccFocalLoss()], num_scales=2)
+    terms = loss(logits, gt)
+    assert [t.item() for t in terms.values()] == [0.0, 0.0]
+    sum(terms.values()).backward()
+    assert all(torch.equal(x.grad, torch.zeros_like(x)) for x in logits)
+
+
+def test_multi_scale_bad_inputs_raise():
+    """Wrong scale count or grid, clashing names or labels."""
+    gt = torch.zeros(1, 4, 4, 2, dtype=torch.long)
+    loss = MultiScaleOccupancyLoss([OccFocalLoss()], num_scales=2)
+    with pytest.raises(ValueError, match='expected 2 predictions'):
+        loss([torch.zeros(1, 3, 4, 4, 2)], gt)
+    with pytest.raises(ValueError, match='scale 1 predicts'):
+        loss([torch.zeros(1, 3, 4, 4, 2), torch.zeros(1, 3, 4, 4, 2)], gt)
+    with pytest.raises(ValueError, match='share a name'):
+        MultiScaleOccupancyLoss([OccFocalLoss(), OccFocalLoss()])
+    with pytest.raises(ValueError, match='empty_index=17'):
+        MultiScaleOccupancyLoss([SceneClassAffinityLoss(empty_index=17)])

@@ -1,0 +1,110 @@
+"""Tests of OccLovaszLoss on hand-computed voxels."""
+import math
+
+import pytest
+import torch
+
+from projects.occ_common.models.losses import OccLovaszLoss
+
+LN3 = math.log(3.0)
+
+
+def _voxels_5d(labels):
+    """Logits (1, 2, 3, 1, 1): p = (0.75, 0.25), (0.5, 0.5), (0.99.., ..).
+
+    The third voxel is meant to be ignored in every test.
+    """
+    flat = torch.tensor([[LN3, 0.0], [0.0, 0.0], [5.0, -5.0]])
+    logits = flat.t().reshape(1, 2, 3, 1, 1).clone().requires_grad_()
+    return logits, torch.tensor(labels).reshape(1, 3, 1, 1)
+
+
+def test_lovasz_hand_computed_present():
+    """Voxel a: label 0, p = (0.75, 0.25); b: label 1, p = (0.5, 0.5).
+
+    class 0: fg = (1, 0), errors |fg - p0| = (0.25, 0.5); sorted (b, a).
+      k=1: inter = 1 - 0 = 1, union = 1 + 1 = 2, J = 0.5
+      k=2: inter = 1 - 1 = 0, union = 2, J = 1 -> grad (0.5, 0.5)
+      loss_0 = 0.5 * 0.5 + 0.25 * 0.5 = 0.375
+    class 1: fg = (0, 1), errors (0.25, 0.5); sorted (b, a).
+      k=1: inter = 0, union = 1, J = 1; k=2: union = 2, J = 1
+      grad (1, 0) -> loss_1 = 0.5
+    mean = 0.4375.
+    """
+    logits, target = _voxels_5d([0, 1, 255])
+    loss = OccLovaszLoss()(logits, target)
+    assert loss.item() == pytest.approx(0.4375, abs=1e-6)
+    loss.backward()
+    assert torch.isfinite(logits.grad).all()
+    assert torch.equal(logits.grad[0, :, 2], torch.zeros(2, 1, 1))
+    assert torch.equal(target[0, 2], torch.tensor([[255]]))
+
+
+def test_lovasz_class_selection_and_weight():
+    """Same voxels. classes=[1] -> 0.5; class_weight (1, 2) -> (0.375 +
+    2 * 0.5) / 2 = 0.6875; loss_weight 2 doubles 0.4375 to 0.875."""
+    logits, target = _voxels_5d([0, 1, 255])
+    assert OccLovaszLoss(classes=[1])(logits, target).item() == \
+        pytest.approx(0.5, abs=1e-6)
+    assert OccLovaszLoss(class_weight=[1.0, 2.0])(logits, target).item() \
+        == pytest.approx(0.6875, abs=1e-6)
+    assert OccLovaszLoss(loss_weight=2.0)(logits, target).item() == \
+        pytest.approx(0.875, abs=1e-6)
+
+
+def test_lovasz_all_includes_absent_class():
+    """Both voxels labelled 0.
+
+    class 0: fg = (1, 1), errors (0.25, 0.5), sorted (0.5, 0.25); gts = 2:
+      k=1: inter = 1, union = 2, J = 0.5; k=2: inter = 0, J = 1
+      loss_0 = 0.5 * 0.5 + 0.25 * 0.5 = 0.375 ('present' gives this)
+    class 1: fg = (0, 0), errors (0.25, 0.5): J = (1, 1), grad (1, 0)
+      loss_1 = 0.5 (the largest error); 'all' = (0.375 + 0.5) / 2 = 0.4375.
+    """
+    logits, target = _voxels_5d([0, 0, 255])
+    assert OccLovaszLoss()(logits, target).item() == pytest.approx(
+        0.375, abs=1e-6)
+    assert OccLovaszLoss(classes='all')(logits, target).item() == \
+        pytest.approx(0.4375, abs=1e-6)
+
+
+def test_lovasz_single_supervised_voxel():
+    """One voxel (label 1, p = (0.5, 0.5)): class 1, error 0.5, J_1 = 1
+    -> 0.5. mmdet3d's LovaszLoss loses the class axis in this case."""
+    logits, target = _voxels_5d([255, 1, 255])
+    loss = OccLovaszLoss()(logits, target)
+    assert loss.item() == pytest.approx(0.5, abs=1e-6)
+    loss.backward()
+    assert torch.isfinite(logits.grad).all()
+
+
+def test_lovasz_all_ignored_is_finite_zero():
+    """Every voxel ignored: 0 and zero gradients."""
+    logits, target = _voxels_5d([255, 255, 255])
+    loss = OccLovaszLoss()(logits, target)
+    assert loss.item() == 0.0
+    loss.backward()
+    assert torch.equal(logits.grad, torch.zeros_like(logits))
+
+
+def test_lovasz_matches_mmdet3d_on_4d_input():
+    """Where mmdet3d's LovaszLoss works (4-D logits, >= 2 supervised
+    voxels) it gives the same 0.4375; on 5-D logits it raises, which is
+    why this module exists."""
+    from mmdet3d.models.losses import LovaszLoss
+    logits, target = _voxels_5d([0, 1, 255])
+    reference = LovaszLoss(reduction='none')(logits[..., 0], target[..., 0])
+    assert reference.item() == pytest.approx(0.4375, abs=1e-6)
+    with pytest.raises(ValueError):
+        LovaszLoss(reduction='none')(logits, target)
+
+
+def test_lovasz_bad_inputs_raise():
+    """Invalid classes and labels are errors."""
+    logits, target = _voxels_5d([0, 1, 7])
+    with pytest.raises(ValueError, match='labels'):
+        OccLovaszLoss()(logits, target)
+    with pytest.raises(ValueError, match='out of range'):
+        OccLovaszLoss(classes=[3])(logits, torch.zeros_like(target))
+    with pytest.raises(ValueError, match='present'):
+        OccLovaszLoss(classes='some')

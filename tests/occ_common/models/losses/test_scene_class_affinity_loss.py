@@ -1,0 +1,129 @@
+"""Tests of SceneClassAffinityLoss (MonoScene) on hand-computed voxels."""
+import math
+
+import pytest
+import torch
+
+from projects.occ_common.models.losses import SceneClassAffinityLoss
+
+LN2 = math.log(2.0)
+EPS = 1e-5
+
+
+def _three_class_voxels():
+    """Logits (1, 3, 4, 1, 1) and labels (1, 4, 1, 1).
+
+    a: label 1, p = (0.25, 0.5, 0.25)   [logits (0, ln 2, 0)]
+    b: label 0, p = (0.5, 0.25, 0.25)   [logits (ln 2, 0, 0)]
+    c: label 1, p = (0.25, 0.5, 0.25)
+    d: label 255 (ignored)
+    """
+    flat = torch.tensor([[0.0, LN2, 0.0], [LN2, 0.0, 0.0], [0.0, LN2, 0.0],
+                         [3.0, -1.0, 2.0]])
+    logits = flat.t().reshape(1, 3, 4, 1, 1).clone().requires_grad_()
+    target = torch.tensor([1, 0, 1, 255]).reshape(1, 4, 1, 1)
+    return logits, target
+
+
+def test_sem_hand_computed():
+    """Mean over the classes present (0 and 1); class 2 is skipped.
+
+    class 0: t = (0, 1, 0), p = (0.25, 0.5, 0.25)
+      P = 0.5 / 1.0 = 0.5, R = 0.5 / 1 = 0.5, S = (0.75 + 0.75) / 2 = 0.75
+      loss_0 = ln 2 + ln 2 + ln(4/3) = ln(16/3)
+    class 1: t = (1, 0, 1), p = (0.5, 0.25, 0.5)
+      P = 1.0 / 1.25 = 0.8, R = 1.0 / 2 = 0.5, S = 0.75 / 1 = 0.75
+      loss_1 = ln 1.25 + ln 2 + ln(4/3) = ln(10/3)
+    mean = ln(160/9) / 2 = 1.4389729 (eps changes it by < 1e-4).
+    """
+    logits, target = _three_class_voxels()
+    loss = SceneClassAffinityLoss(mode='sem')(logits, target)
+    assert loss.item() == pytest.approx(math.log(160 / 9) / 2, abs=1e-4)
+    loss.backward()
+    assert torch.isfinite(logits.grad).all()
+    assert torch.equal(logits.grad[0, :, 3], torch.zeros(3, 1, 1))
+
+
+def test_geo_hand_computed_empty_first():
+    """empty_index = 0 (SurroundOcc): occupied prob = 1 - p0.
+
+    p_occ = (0.75, 0.5, 0.75), t = (1, 0, 1)
+    P = 1.5 / 2.0 = 0.75, R = 1.5 / 2 = 0.75, S = 0.5 / 1 = 0.5
+    loss = 2 ln(4/3) + ln 2 = ln(32/9) = 1.2685113; loss_weight 2 doubles.
+    """
+    logits, target = _three_class_voxels()
+    loss = SceneClassAffinityLoss(mode='geo', loss_weight=2.0)(logits,
+                                                               target)
+    assert loss.item() == pytest.approx(2 * math.log(32 / 9), abs=1e-4)
+    loss.backward()
+    assert torch.isfinite(logits.grad).all()
+
+
+def test_geo_hand_computed_empty_last():
+    """empty_index = 2 (Occ3D-style free last): p_occ = 1 - p2 = 0.75 each.
+
+    t = (1, 1, 1) (no voxel is label 2): P = 2.25 / 2.25 = 1,
+    R = 2.25 / 3 = 0.75, S = (0 + eps) / (0 + eps) = 1 (no negatives)
+    loss = ln(4/3) = 0.2876821.
+    """
+    logits, target = _three_class_voxels()
+    loss = SceneClassAffinityLoss(mode='geo', empty_index=2)(logits, target)
+    assert loss.item() == pytest.approx(math.log(4 / 3), abs=1e-4)
+
+
+def test_geo_all_empty_batch_is_finite():
+    """Two empty voxels, logits 0 (p = 0.5): MonoScene's recall is 0 / 0.
+
+    P: (0 + eps) / (1.0 + eps) -> ln((1 + eps) / eps) = 11.5129355
+    R: (0 + eps) / (0 + eps) = 1 -> 0
+    S: (1.0 + eps) / (2 + eps) -> ln((2 + eps) / (1 + eps)) = 0.6931422
+    total = 12.2060777, with finite gradients.
+    """
+    logits = torch.zeros(1, 2, 2, 1, 1, requires_grad=True)
+    target = torch.zeros(1, 2, 1, 1, dtype=torch.long)
+    loss = SceneClassAffinityLoss(mode='geo')(logits, target)
+    expected = (math.log((1 + EPS) / EPS) + math.log(
+        (2 + EPS) / (1 + EPS)))
+    assert loss.item() == pytest.approx(expected, rel=1e-5)
+    loss.backward()
+    assert torch.isfinite(logits.grad).all()
+
+
+def test_sem_all_empty_batch_is_finite():
+    """Only class 0 present, p0 = 0.5 on both voxels.
+
+    P = 1.0 / 1.0 = 1, R = 1.0 / 2 = 0.5, S = (0 + eps) / (0 + eps) = 1
+    loss = ln 2.
+    """
+    logits = torch.zeros(1, 2, 2, 1, 1, requires_grad=True)
+    target = torch.zeros(1, 2, 1, 1, dtype=torch.long)
+    loss = SceneClassAffinityLoss(mode='sem')(logits, target)
+    assert loss.item() == pytest.approx(LN2, abs=1e-4)
+    loss.backward()
+    assert torch.isfinite(logits.grad).all()
+
+
+@pytest.mark.parametrize('mode', ['geo', 'sem'])
+def test_all_ignored_is_zero(mode):
+    """Every voxel ignored: 0 with zero gradients, inputs unchanged."""
+    logits = torch.randn(1, 3, 2, 2, 1, requires_grad=True)
+    target = torch.full((1, 2, 2, 1), 255)
+    loss = SceneClassAffinityLoss(mode=mode)(logits, target)
+    assert loss.item() == 0.0
+    loss.backward()
+    assert torch.equal(logits.grad, torch.zeros_like(logits))
+    assert bool((target == 255).all())
+
+
+def test_bad_config_and_inputs_raise():
+    """Unknown mode, eps <= 0, empty index or labels out of range."""
+    with pytest.raises(ValueError, match='mode'):
+        SceneClassAffinityLoss(mode='both')
+    with pytest.raises(ValueError, match='eps'):
+        SceneClassAffinityLoss(eps=0.0)
+    logits, target = _three_class_voxels()
+    with pytest.raises(ValueError, match='empty_index 17'):
+        SceneClassAffinityLoss(empty_index=17)(logits, target)
+    with pytest.raises(ValueError, match='labels'):
+        SceneClassAffinityLoss()(logits, target.clamp(max=9) + 3)
+    assert SceneClassAffinityLoss(mode='sem').loss_name == 'loss_sem_scal'
