@@ -53,7 +53,9 @@ if has_module torch; then
     log "keeping installed torch $("$py" -c 'import torch; print(torch.__version__)')"
 else
     log "installing torch (CPU build)"
-    "${pip[@]}" install -q -c "$req/constraints.txt" torch==2.13.0
+    # numpy too: mmcv's build below imports torch, which warns without it.
+    "${pip[@]}" install -q -c "$req/constraints.txt" torch==2.13.0 \
+        numpy==1.26.4
 fi
 
 mmcv_ok() {
