@@ -1,0 +1,382 @@
+"""nuScenes (real or synthetic) -> mmdet3d v2 info files for occupancy.
+
+Walks every sample of a nuScenes database with nuscenes-devkit and writes
+``<prefix>_infos_{train,val,val_rainy,val_night}.pkl`` (``v1.0-test``:
+``<prefix>_infos_test.pkl``), each ``dict(metainfo, data_list)``. The keys of
+a sample are listed in :mod:`..info_format` and in the README of this
+package. All matrices are 4x4 (``cam2img`` 3x3) nested lists, row-major,
+mapping column vectors: ``p_cam = lidar2cam @ p_lidar``.
+
+Splits:
+    * ``v1.0-trainval``: ``train`` / ``val`` of ``nuscenes.utils.splits``.
+    * ``v1.0-mini``: ``mini_train`` / ``mini_val``.
+    * Synthetic worlds (recognised by the generator's
+      ``synthetic_gt/meta.json`` under the root): the last
+      ``max(1, n_scenes // 5)`` scenes in name order are ``val``, the others
+      ``train``; a one-scene world uses its scene for both.
+    * ``val_scenes`` overrides any of these (all other scenes are train).
+    ``val_rainy`` / ``val_night`` are the ``val`` samples whose scene
+    description mentions rain / night.
+
+Every file an info links (key frame, sweeps, images, lidarseg labels,
+occupancy labels) is checked to exist; an occupancy label folder that does
+not exist at all is recorded as ``None`` (with a warning) because users often
+have only one of SurroundOcc / Occ3D.
+"""
+import json
+import os
+import os.path as osp
+import warnings
+from typing import Dict, List, Optional, Sequence
+
+import numpy as np
+
+from ..info_format import (CAMERA_NAMES, INFO_VERSION, NUM_POINT_FEATS,
+                           weather_flags)
+from ..nuscenes_classes import OCC_CLASS_NAMES
+
+#: File that marks a root written by the synthetic world generator
+#: (``tools/create_synthetic_nuscenes.py``).
+SYNTHETIC_MARKER = osp.join('synthetic_gt', 'meta.json')
+
+
+def is_synthetic_root(root_path: str) -> bool:
+    """Whether ``root_path`` holds a world of the synthetic generator."""
+    return osp.isfile(osp.join(root_path, SYNTHETIC_MARKER))
+
+
+def pose_matrix(record: dict) -> np.ndarray:
+    """4x4 rigid transform of a ``calibrated_sensor`` / ``ego_pose`` record.
+
+    Args:
+        record (dict): Has ``rotation`` (w, x, y, z quaternion) and
+            ``translation`` (3,).
+
+    Returns:
+        np.ndarray: Shape (4, 4), float64, sensor (or ego) to parent frame.
+    """
+    from pyquaternion import Quaternion
+    mat = np.eye(4)
+    mat[:3, :3] = Quaternion(record['rotation']).rotation_matrix
+    mat[:3, 3] = record['translation']
+    return mat
+
+
+def _rel(path: str, root: str) -> str:
+    """Path relative to ``root`` when it lies below it, else absolute."""
+    path, root = osp.abspath(path), osp.abspath(root)
+    if osp.commonpath([path, root]) == root:
+        return osp.relpath(path, root)
+    return path
+
+
+def _must_exist(path: str, what: str, sample_token: str) -> None:
+    if not osp.isfile(path):
+        raise FileNotFoundError(
+            f'{what} of sample {sample_token} not found: {path}')
+
+
+class _Context:
+    """What every sample needs: the devkit handle and the label roots."""
+
+    def __init__(self, nusc, root: str, surroundocc_root: Optional[str],
+                 occ3d_root: Optional[str], max_sweeps: int):
+        self.nusc = nusc
+        self.root = root
+        self.surroundocc_root = surroundocc_root
+        self.occ3d_root = occ3d_root
+        self.max_sweeps = max_sweeps
+        self.has_lidarseg = hasattr(nusc, 'lidarseg')
+
+    def sensor2global(self, sd: dict) -> np.ndarray:
+        cs = self.nusc.get('calibrated_sensor', sd['calibrated_sensor_token'])
+        ep = self.nusc.get('ego_pose', sd['ego_pose_token'])
+        return pose_matrix(ep) @ pose_matrix(cs)
+
+
+def _sweeps(ctx: _Context, lidar_sd: dict, global2lidar: np.ndarray,
+            sample_token: str) -> List[dict]:
+    """Up to ``max_sweeps`` earlier LiDAR sweeps, newest first.
+
+    The layout is mmdet3d 1.4's (``lidar_points.lidar_path``,
+    ``lidar_points.lidar2sensor``, ``timestamp`` in seconds);
+    ``lidar2sensor`` is the exact inverse of ``sensor2lidar`` (key-frame
+    LiDAR -> sweep LiDAR), as mmdet3d's own converter writes it.
+    """
+    nusc, sweeps, sd = ctx.nusc, [], lidar_sd
+    while len(sweeps) < ctx.max_sweeps and sd['prev']:
+        sd = nusc.get('sample_data', sd['prev'])
+        path = osp.join(ctx.root, sd['filename'])
+        _must_exist(path, 'LiDAR sweep', sample_token)
+        cs = nusc.get('calibrated_sensor', sd['calibrated_sensor_token'])
+        ep = nusc.get('ego_pose', sd['ego_pose_token'])
+        sensor2lidar = global2lidar @ pose_matrix(ep) @ pose_matrix(cs)
+        sweeps.append(
+            dict(
+                lidar_points=dict(
+                    lidar_path=_rel(path, ctx.root),
+                    lidar2ego=pose_matrix(cs).tolist(),
+                    lidar2sensor=np.linalg.inv(sensor2lidar).tolist(),
+                    sensor2lidar=sensor2lidar.tolist()),
+                ego2global=pose_matrix(ep).tolist(),
+                timestamp=sd['timestamp'] / 1e6,
+                sample_data_token=sd['token'],
+                is_key_frame=sd['is_key_frame']))
+    return sweeps
+
+
+def _images(ctx: _Context, sample: dict, global2lidar: np.ndarray,
+            cam_names: Sequence[str]) -> Dict[str, dict]:
+    """Per-camera paths and calibration, in the key-frame LiDAR frame."""
+    nusc, images = ctx.nusc, {}
+    for cam in cam_names:
+        if cam not in sample['data']:
+            raise ValueError(f'sample {sample["token"]} has no {cam} image; '
+                             f'expected the cameras {list(cam_names)}')
+        sd = nusc.get('sample_data', sample['data'][cam])
+        path = osp.join(ctx.root, sd['filename'])
+        _must_exist(path, f'{cam} image', sample['token'])
+        cs = nusc.get('calibrated_sensor', sd['calibrated_sensor_token'])
+        cam2img = np.asarray(cs['camera_intrinsic'], dtype=np.float64)
+        # The camera and the LiDAR fire at different times: go through the
+        # global frame with each sensor's own ego pose.
+        lidar2cam = np.linalg.inv(global2lidar @ ctx.sensor2global(sd))
+        viewpad = np.eye(4)
+        viewpad[:3, :3] = cam2img
+        images[cam] = dict(
+            img_path=_rel(path, ctx.root),
+            cam2img=cam2img.tolist(),
+            lidar2cam=lidar2cam.tolist(),
+            cam2ego=pose_matrix(cs).tolist(),
+            lidar2img=(viewpad @ lidar2cam).tolist(),
+            sample_data_token=sd['token'],
+            timestamp=sd['timestamp'] / 1e6)
+    return images
+
+
+def _label_paths(ctx: _Context, sample: dict, scene: dict,
+                 lidar_sd: dict) -> dict:
+    """Paths of the lidarseg and both occupancy labels (``None``: absent)."""
+    token, paths = sample['token'], {}
+    paths['pts_semantic_mask_path'] = None
+    if ctx.has_lidarseg:
+        try:
+            rec = ctx.nusc.get('lidarseg', lidar_sd['token'])
+        except KeyError:
+            rec = None  # e.g. the test split has no labels.
+        if rec is not None:
+            path = osp.join(ctx.root, rec['filename'])
+            _must_exist(path, 'lidarseg label', token)
+            paths['pts_semantic_mask_path'] = _rel(path, ctx.root)
+    paths['occ_surroundocc_path'] = None
+    if ctx.surroundocc_root is not None:
+        path = osp.join(ctx.surroundocc_root, 'samples',
+                        osp.basename(lidar_sd['filename']) + '.npy')
+        _must_exist(path, 'SurroundOcc label', token)
+        paths['occ_surroundocc_path'] = _rel(path, ctx.root)
+    paths['occ_occ3d_path'] = None
+    if ctx.occ3d_root is not None:
+        path = osp.join(ctx.occ3d_root, scene['name'], token, 'labels.npz')
+        _must_exist(path, 'Occ3D label', token)
+        paths['occ_occ3d_path'] = _rel(path, ctx.root)
+    return paths
+
+
+def sample_info(ctx: _Context, sample: dict, scene: dict,
+                cam_names: Sequence[str] = CAMERA_NAMES) -> dict:
+    """The info dict of one key frame (``sample_idx`` is set by the caller).
+
+    Args:
+        ctx (_Context): Devkit handle and label roots.
+        sample (dict): A ``sample`` record.
+        scene (dict): Its ``scene`` record.
+        cam_names (Sequence[str]): Cameras to link. Defaults to the six
+            nuScenes cameras in mmdet3d's order.
+
+    Returns:
+        dict: One ``data_list`` entry (see the module docstring).
+    """
+    nusc = ctx.nusc
+    lidar_sd = nusc.get('sample_data', sample['data']['LIDAR_TOP'])
+    lidar_path = osp.join(ctx.root, lidar_sd['filename'])
+    _must_exist(lidar_path, 'LiDAR key frame', sample['token'])
+    cs = nusc.get('calibrated_sensor', lidar_sd['calibrated_sensor_token'])
+    ep = nusc.get('ego_pose', lidar_sd['ego_pose_token'])
+    lidar2ego, ego2global = pose_matrix(cs), pose_matrix(ep)
+    global2lidar = np.linalg.inv(ego2global @ lidar2ego)
+    info = dict(
+        sample_idx=-1,
+        token=sample['token'],
+        timestamp=lidar_sd['timestamp'] / 1e6,
+        scene_token=scene['token'],
+        scene_name=scene['name'],
+        scene_description=scene['description'],
+        **weather_flags(scene['description']),
+        prev=sample['prev'],
+        next=sample['next'],
+        ego2global=ego2global.tolist(),
+        lidar_points=dict(
+            num_pts_feats=NUM_POINT_FEATS,
+            lidar_path=_rel(lidar_path, ctx.root),
+            lidar2ego=lidar2ego.tolist()),
+        lidar_sweeps=_sweeps(ctx, lidar_sd, global2lidar, sample['token']),
+        images=_images(ctx, sample, global2lidar, cam_names))
+    info.update(_label_paths(ctx, sample, scene, lidar_sd))
+    return info
+
+
+def _check_lidarseg_files(root_path: str, version: str) -> None:
+    """Name missing lidarseg files before nuscenes-devkit's bare count
+    assertion does."""
+    table = osp.join(root_path, version, 'lidarseg.json')
+    if not osp.isfile(table):
+        return
+    with open(table) as f:
+        records = json.load(f)
+    missing = [
+        osp.join(root_path, rec['filename']) for rec in records
+        if not osp.isfile(osp.join(root_path, rec['filename']))
+    ]
+    if missing:
+        raise FileNotFoundError(
+            f'{len(missing)} lidarseg label files listed in {table} are '
+            f'missing, e.g. {missing[:3]}')
+
+
+def split_scenes(scene_names: Sequence[str],
+                 version: str,
+                 val_scenes: Optional[Sequence[str]] = None,
+                 synthetic: bool = False) -> Dict[str, List[str]]:
+    """Scene names per split (see the module docstring for the rules).
+
+    Args:
+        scene_names (Sequence[str]): Scenes present in the database.
+        version (str): nuScenes version, e.g. ``'v1.0-trainval'``.
+        val_scenes (Sequence[str], optional): Explicit val scenes.
+        synthetic (bool): The database is a synthetic world.
+            Defaults to False.
+
+    Returns:
+        dict[str, list[str]]: ``train`` and ``val`` (or only ``test``).
+    """
+    names = sorted(scene_names)
+    if val_scenes is not None:
+        unknown = sorted(set(val_scenes) - set(names))
+        if unknown:
+            raise ValueError(f'val scenes {unknown} are not in the database '
+                             f'(it has {names})')
+        val = [n for n in names if n in set(val_scenes)]
+        return dict(train=[n for n in names if n not in set(val)], val=val)
+    if synthetic:
+        if len(names) == 1:
+            warnings.warn(f'synthetic world with one scene ({names[0]}): it '
+                          'is used for both train and val')
+            return dict(train=names, val=names)
+        num_val = max(1, len(names) // 5)
+        return dict(train=names[:-num_val], val=names[-num_val:])
+    from nuscenes.utils.splits import create_splits_scenes
+    splits = create_splits_scenes()
+    present = set(names)
+    if version == 'v1.0-test':
+        return dict(test=[n for n in splits['test'] if n in present])
+    keys = dict(train='mini_train', val='mini_val') \
+        if version == 'v1.0-mini' else dict(train='train', val='val')
+    return {
+        split: [n for n in splits[key] if n in present]
+        for split, key in keys.items()
+    }
+
+
+def create_nuscenes_occ_infos(root_path: str,
+                              out_dir: Optional[str] = None,
+                              info_prefix: str = 'nuscenes_occ',
+                              version: str = 'v1.0-trainval',
+                              surroundocc_root: Optional[str] = None,
+                              occ3d_root: Optional[str] = None,
+                              max_sweeps: int = 10,
+                              val_scenes: Optional[Sequence[str]] = None,
+                              overwrite: bool = False) -> Dict[str, str]:
+    """Write the info files of a nuScenes root (real or synthetic).
+
+    Args:
+        root_path (str): nuScenes data root (holds ``samples/``, ``sweeps/``,
+            ``<version>/``).
+        out_dir (str, optional): Where the pickles go. Defaults to
+            ``root_path``.
+        info_prefix (str): File name prefix. Defaults to 'nuscenes_occ'.
+        version (str): nuScenes version. Defaults to 'v1.0-trainval'.
+        surroundocc_root (str, optional): SurroundOcc label folder (holds
+            ``samples/*.pcd.bin.npy``). Defaults to
+            ``<root_path>/nuscenes_occ``.
+        occ3d_root (str, optional): Occ3D label folder (holds
+            ``<scene>/<sample token>/labels.npz``). Defaults to
+            ``<root_path>/gts``.
+        max_sweeps (int): Earlier sweeps to link per sample. Defaults to 10.
+        val_scenes (Sequence[str], optional): Explicit val scene names.
+        overwrite (bool): Replace existing info files. Defaults to False.
+
+    Returns:
+        dict[str, str]: Split name -> written file.
+
+    Raises:
+        FileExistsError: An info file exists and ``overwrite`` is False.
+        FileNotFoundError: A linked file is missing (message names it).
+    """
+    import mmengine
+    from nuscenes import NuScenes
+    out_dir = out_dir or root_path
+    targets = dict()
+    for split in (('test', ) if version == 'v1.0-test' else
+                  ('train', 'val', 'val_rainy', 'val_night')):
+        targets[split] = osp.join(out_dir, f'{info_prefix}_infos_{split}.pkl')
+    existing = [p for p in targets.values() if osp.exists(p)]
+    if existing and not overwrite:
+        raise FileExistsError(f'info files already exist: {existing}; pass '
+                              '--overwrite to replace them')
+    label_roots = []
+    for given, default, name in (
+            (surroundocc_root, 'nuscenes_occ', 'SurroundOcc'),
+            (occ3d_root, 'gts', 'Occ3D')):
+        folder = given or osp.join(root_path, default)
+        if not osp.isdir(folder):
+            warnings.warn(f'{name} label folder {folder} not found: its '
+                          'paths are recorded as None')
+            folder = None
+        label_roots.append(folder)
+    _check_lidarseg_files(root_path, version)
+    nusc = NuScenes(version=version, dataroot=root_path, verbose=False)
+    ctx = _Context(nusc, root_path, *label_roots, max_sweeps)
+    scenes = {s['name']: s for s in nusc.scene}
+    synthetic = is_synthetic_root(root_path)
+    splits = split_scenes(list(scenes), version, val_scenes, synthetic)
+    data = {}
+    for split, names in splits.items():
+        entries = []
+        for name in names:
+            token = scenes[name]['first_sample_token']
+            while token:
+                sample = nusc.get('sample', token)
+                entries.append(sample_info(ctx, sample, scenes[name]))
+                token = sample['next']
+        data[split] = entries
+    if 'val' in data:
+        data['val_rainy'] = [e for e in data['val'] if e['is_rainy']]
+        data['val_night'] = [e for e in data['val'] if e['is_night']]
+    os.makedirs(out_dir, exist_ok=True)
+    for split, entries in data.items():
+        data_list = []
+        for idx, entry in enumerate(entries):
+            data_list.append(dict(entry, sample_idx=idx))
+        metainfo = dict(
+            dataset='nuscenes-occ',
+            version=version,
+            info_version=INFO_VERSION,
+            classes=OCC_CLASS_NAMES,
+            split=split,
+            scenes=sorted({e['scene_name']
+                           for e in entries}),
+            synthetic=synthetic,
+            cameras=CAMERA_NAMES)
+        mmengine.dump(
+            dict(metainfo=metainfo, data_list=data_list), targets[split])
+    return targets

@@ -1,0 +1,86 @@
+"""The schema of the occupancy info files, shared by converter and dataset.
+
+The converter (:mod:`.converters.nuscenes_occ_converter`) writes and the
+dataset (:class:`.NuScenesOccDataset`) reads these pickles; both import the
+constants from here so that the version check cannot drift. Importing this
+module needs neither nuscenes-devkit nor mmdet3d.
+
+An info file is ``dict(metainfo=..., data_list=[...])`` in mmdet3d's v2
+layout; :data:`INFO_VERSION` is bumped whenever a key changes meaning, so an
+info file written by another converter (or an older one) is refused instead
+of being misread.
+"""
+from typing import Mapping
+
+#: Version of the info-file schema written by this converter.
+INFO_VERSION = 'occ-nus-1.0'
+
+#: Camera order of mmdet3d's nuScenes infos; the multi-view loader stacks
+#: the views in this order unless a config says otherwise.
+CAMERA_NAMES = ('CAM_FRONT', 'CAM_FRONT_RIGHT', 'CAM_FRONT_LEFT', 'CAM_BACK',
+                'CAM_BACK_LEFT', 'CAM_BACK_RIGHT')
+
+#: Values per LiDAR point in nuScenes ``.pcd.bin`` files:
+#: x, y, z, intensity, ring index (float32 each).
+NUM_POINT_FEATS = 5
+
+#: Keys every ``data_list`` entry carries (checked on load).
+REQUIRED_SAMPLE_KEYS = ('sample_idx', 'token', 'timestamp', 'scene_token',
+                        'scene_name', 'is_rainy', 'is_night', 'ego2global',
+                        'lidar_points', 'lidar_sweeps', 'images',
+                        'pts_semantic_mask_path', 'occ_surroundocc_path',
+                        'occ_occ3d_path')
+
+#: Split names written by the converter, as ``<prefix>_infos_<split>.pkl``.
+SPLITS = ('train', 'val', 'val_rainy', 'val_night')
+
+
+def check_info_file(infos: Mapping, path: str) -> None:
+    """Refuse an info file that this library's converter did not write.
+
+    Args:
+        infos (Mapping): The loaded pickle.
+        path (str): Its file name, for the error message.
+
+    Raises:
+        ValueError: If the layout is not ``dict(metainfo, data_list)``, the
+            ``info_version`` differs from :data:`INFO_VERSION`, or a sample
+            lacks one of :data:`REQUIRED_SAMPLE_KEYS`.
+    """
+    if not isinstance(infos, Mapping) or 'data_list' not in infos \
+            or 'metainfo' not in infos:
+        raise ValueError(
+            f'{path}: expected an info file dict(metainfo=..., data_list=...)'
+            f' written by tools/create_data.py, got {type(infos).__name__}'
+            f' with keys {sorted(infos) if isinstance(infos, Mapping) else []}'
+        )
+    found = infos['metainfo'].get('info_version')
+    if found != INFO_VERSION:
+        raise ValueError(
+            f'{path}: info_version {found!r} does not match the expected '
+            f'{INFO_VERSION!r}; the file comes from another converter or an '
+            'older version of it. Re-create it with tools/create_data.py '
+            '--overwrite.')
+    for entry in infos['data_list']:
+        missing = [k for k in REQUIRED_SAMPLE_KEYS if k not in entry]
+        if missing:
+            raise ValueError(
+                f'{path}: sample {entry.get("token", "?")} lacks the keys '
+                f'{missing} of info_version {INFO_VERSION!r}')
+
+
+def weather_flags(description: str) -> dict:
+    """Rain and night flags from a nuScenes scene description.
+
+    nuScenes has no weather table; its scene descriptions mention "rain" and
+    "night" in free text (e.g. "Night, rain, parking lot"), which is how
+    the rainy / night evaluation subsets are usually drawn.
+
+    Args:
+        description (str): ``scene['description']``.
+
+    Returns:
+        dict: ``is_rainy`` and ``is_night`` (bool).
+    """
+    text = description.lower()
+    return dict(is_rainy='rain' in text, is_night='night' in text)

@@ -1,0 +1,210 @@
+"""Sparse per-camera depth maps and 2D semantic maps from LiDAR points.
+
+Both project the points with the current ``lidar2img`` (which includes the
+image augmentation, see :mod:`.image_aug`), so the maps are aligned with
+the augmented images. Pixel ``i`` covers ``[i, i + 1)``: a point at image
+coordinate ``u`` falls in column ``floor(u)``. Where several points share a
+pixel, the nearest one (smallest depth) wins, as a camera would see it.
+"""
+from typing import Optional, Tuple
+
+import numpy as np
+from mmcv.transforms import BaseTransform
+from mmdet3d.registry import TRANSFORMS
+
+from ..datasets.occ_formats import IGNORE_INDEX
+from .frames import points_xyz
+
+
+def project_nearest(xyz: np.ndarray,
+                    lidar2img: np.ndarray,
+                    img_shape: Tuple[int, int],
+                    min_depth: float = 1e-3,
+                    max_depth: Optional[float] = None) -> tuple:
+    """Project points into every view and keep the nearest per pixel.
+
+    Args:
+        xyz (np.ndarray): Points in the working frame. Shape (P, 3).
+        lidar2img (np.ndarray): Shape (N, 4, 4).
+        img_shape (tuple[int, int]): (H, W).
+        min_depth (float): Points nearer than this are dropped (behind or
+            on the camera). Defaults to 1e-3.
+        max_depth (float, optional): Points farther are dropped.
+
+    Returns:
+        tuple[np.ndarray, ...]: ``view``, ``row``, ``col`` (int64),
+        ``depth`` (float64) and ``index`` (int64, into ``xyz``) of the
+        winning point of each hit pixel. Shapes (K,).
+    """
+    height, width = img_shape
+    num_views = len(lidar2img)
+    if len(xyz) == 0 or num_views == 0:
+        empty = np.zeros(0, np.int64)
+        return empty, empty, empty, np.zeros(0), empty
+    # (N, 3, 3) @ (3, P) + (N, 3, 1): image-plane coordinates times depth.
+    cam = lidar2img[:, :3, :3] @ xyz.T + lidar2img[:, :3, 3:]
+    depth = cam[:, 2]
+    keep = depth > min_depth
+    if max_depth is not None:
+        keep &= depth < max_depth
+    safe = np.where(keep, depth, 1.0)
+    col = np.floor(cam[:, 0] / safe)
+    row = np.floor(cam[:, 1] / safe)
+    keep &= (col >= 0) & (col < width) & (row >= 0) & (row < height)
+    view, index = np.nonzero(keep)
+    row = row[view, index].astype(np.int64)
+    col = col[view, index].astype(np.int64)
+    depth = depth[view, index]
+    pixel = (view * height + row) * width + col
+    order = np.lexsort((depth, pixel))  # by pixel, then nearest first
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = pixel[order][1:] != pixel[order][:-1]
+    win = order[first]
+    return view[win], row[win], col[win], depth[win], index[win]
+
+
+def _key_frame(results: dict) -> np.ndarray:
+    """Boolean mask of the key-frame points (time lag 0).
+
+    Without merged sweeps (no ``points_time_dim``) every point is a
+    key-frame point; column 4 of a raw nuScenes file is the ring index.
+    """
+    points = results['points']
+    time_dim = results.get('points_time_dim')
+    if time_dim is None:
+        return np.ones(len(points), dtype=bool)
+    data = points.tensor.numpy() if hasattr(points, 'tensor') else points
+    return data[:, time_dim] == 0
+
+
+@TRANSFORMS.register_module()
+class PointsToDepthMaps(BaseTransform):
+    """Sparse depth map per view: depth of the nearest point per pixel.
+
+    The depth supervision of BEVDepth-style view transforms (Li et al.,
+    AAAI 2023, Sec. 3.2), at the augmented image resolution. A sample with
+    no points gives all-zero maps.
+
+    Args:
+        key_frame_only (bool): Use only points with time lag 0 (moving
+            objects smear across sweeps); the time column is
+            ``points_time_dim``, set by ``LoadOccPointsFromMultiSweeps``.
+            Defaults to True.
+        min_depth (float): Nearer points are dropped. Defaults to 1e-3.
+        max_depth (float, optional): Farther points are dropped.
+
+    Required Keys:
+
+    - points (BasePoints | np.ndarray): Working frame.
+    - lidar2img (np.ndarray): (N, 4, 4).
+    - img_shape (tuple[int, int]): (H, W).
+    - points_time_dim (int, optional): Column of the time lag.
+
+    Added Keys:
+
+    - gt_depth (np.ndarray): Shape (N, H, W), float32, metres; 0 = no
+      point.
+    """
+
+    def __init__(self,
+                 key_frame_only: bool = True,
+                 min_depth: float = 1e-3,
+                 max_depth: Optional[float] = None) -> None:
+        self.key_frame_only = key_frame_only
+        self.min_depth = min_depth
+        self.max_depth = max_depth
+
+    def transform(self, results: dict) -> dict:
+        """Build the depth maps of one sample.
+
+        Args:
+            results (dict): Pipeline state.
+
+        Returns:
+            dict: The state with ``gt_depth``.
+        """
+        height, width = results['img_shape']
+        lidar2img = np.asarray(results['lidar2img'])
+        xyz = points_xyz(results['points'],
+                         _key_frame(results) if self.key_frame_only else None)
+        view, row, col, depth, _ = project_nearest(
+            xyz, lidar2img, (height, width), self.min_depth, self.max_depth)
+        out = np.zeros((len(lidar2img), height, width), np.float32)
+        out[view, row, col] = depth
+        results['gt_depth'] = out
+        return results
+
+    def __repr__(self) -> str:
+        """str: The transform and its arguments."""
+        return (f'{self.__class__.__name__}('
+                f'key_frame_only={self.key_frame_only}, '
+                f'min_depth={self.min_depth}, '
+                f'max_depth={self.max_depth})')
+
+
+@TRANSFORMS.register_module()
+class PointsToSemanticMaps(BaseTransform):
+    """2D semantic map per view from the labelled key-frame points.
+
+    Each pixel takes the label of the nearest labelled point projecting
+    into it (SDG-OCC's 2D semantic supervision); pixels without one are
+    ``ignore_index``. Points whose label is ``ignore_index`` (noise, and
+    sweep points after ``LoadOccPointsFromMultiSweeps``) are skipped, so
+    they never hide a labelled point behind them.
+
+    Args:
+        ignore_index (int): Label of unlabelled pixels and points.
+            Defaults to 255.
+        min_depth (float): Nearer points are dropped. Defaults to 1e-3.
+
+    Required Keys:
+
+    - points (BasePoints | np.ndarray): Working frame.
+    - pts_semantic_mask (np.ndarray): Shape (P,), aligned with points.
+    - lidar2img (np.ndarray): (N, 4, 4).
+    - img_shape (tuple[int, int]): (H, W).
+
+    Added Keys:
+
+    - gt_seg_2d (np.ndarray): Shape (N, H, W), uint8.
+    """
+
+    def __init__(self,
+                 ignore_index: int = IGNORE_INDEX,
+                 min_depth: float = 1e-3) -> None:
+        self.ignore_index = ignore_index
+        self.min_depth = min_depth
+
+    def transform(self, results: dict) -> dict:
+        """Build the semantic maps of one sample.
+
+        Args:
+            results (dict): Pipeline state.
+
+        Returns:
+            dict: The state with ``gt_seg_2d``.
+        """
+        height, width = results['img_shape']
+        lidar2img = np.asarray(results['lidar2img'])
+        labels = np.asarray(results['pts_semantic_mask'])
+        if len(labels) != len(results['points']):
+            raise ValueError(
+                f'pts_semantic_mask has {len(labels)} labels but there are '
+                f'{len(results["points"])} points in sample '
+                f'{results.get("token", "?")}')
+        keep = labels != self.ignore_index
+        xyz = points_xyz(results['points'], keep)
+        view, row, col, _, index = project_nearest(xyz, lidar2img,
+                                                   (height, width),
+                                                   self.min_depth)
+        out = np.full((len(lidar2img), height, width), self.ignore_index,
+                      np.uint8)
+        out[view, row, col] = labels[keep][index]
+        results['gt_seg_2d'] = out
+        return results
+
+    def __repr__(self) -> str:
+        """str: The transform and its arguments."""
+        return (f'{self.__class__.__name__}('
+                f'ignore_index={self.ignore_index}, '
+                f'min_depth={self.min_depth})')

@@ -1,0 +1,327 @@
+"""Loading of multi-view images, occupancy labels and lidarseg labels.
+
+Every loader checks what it reads and raises an error that names the file
+and what was expected, instead of failing later inside numpy.
+"""
+import io
+from typing import Optional, Sequence
+
+import mmcv
+import numpy as np
+from mmcv.transforms import BaseTransform
+from mmdet3d.registry import TRANSFORMS
+from mmengine.fileio import get
+
+from ..datasets.nuscenes_classes import OCC_CLASS_NAMES, lidarseg_to_occ16
+from ..datasets.occ_formats import IGNORE_INDEX, OCC_FORMATS
+from .frames import refresh_lidar2img
+
+
+def _read_bytes(path: str, what: str, backend_args: Optional[dict]) -> bytes:
+    try:
+        return get(path, backend_args=backend_args)
+    except FileNotFoundError:
+        raise FileNotFoundError(f'{what} not found: {path}') from None
+
+
+def _pad44(mat) -> np.ndarray:
+    """A 3x3 or 4x4 matrix as 4x4 float64."""
+    mat = np.asarray(mat, dtype=np.float64)
+    out = np.eye(4)
+    out[:mat.shape[0], :mat.shape[1]] = mat
+    return out
+
+
+@TRANSFORMS.register_module()
+class LoadMultiViewImagesOcc(BaseTransform):
+    """Load the camera images of a sample and stack their calibration.
+
+    Unlike mmdet3d's ``LoadMultiViewImageFromFiles`` it also stacks the
+    per-camera matrices into (N, 4, 4) arrays and starts the image
+    augmentation bookkeeping (``img_aug_matrix`` = identity), see
+    :mod:`.frames`. All views must have one size.
+
+    Args:
+        cam_names (Sequence[str], optional): Views to load, in order.
+            Defaults to the order of ``results['images']``.
+        to_float32 (bool): Convert images to float32. Defaults to False.
+        color_type (str): ``mmcv.imfrombytes`` flag. Defaults to 'color'
+            (BGR uint8; the data preprocessor converts to RGB).
+        backend_args (dict, optional): mmengine file backend arguments.
+
+    Required Keys:
+
+    - images (dict[str, dict]): Per camera ``img_path``, ``cam2img``
+      (3, 3), ``lidar2cam`` (4, 4), ``cam2ego`` (4, 4).
+
+    Added Keys:
+
+    - img (list[np.ndarray]): N images, each shape (H, W, 3).
+    - img_path (list[str]), cam_names (list[str]), num_views (int)
+    - ori_shape, img_shape, pad_shape (tuple[int, int]): (H, W).
+    - cam2img, lidar2cam, cam2ego, img_aug_matrix, lidar2img
+      (np.ndarray): Shape (N, 4, 4), float64.
+    """
+
+    def __init__(self,
+                 cam_names: Optional[Sequence[str]] = None,
+                 to_float32: bool = False,
+                 color_type: str = 'color',
+                 backend_args: Optional[dict] = None) -> None:
+        self.cam_names = None if cam_names is None else list(cam_names)
+        self.to_float32 = to_float32
+        self.color_type = color_type
+        self.backend_args = backend_args
+
+    def transform(self, results: dict) -> dict:
+        """Load the views.
+
+        Args:
+            results (dict): Pipeline state.
+
+        Returns:
+            dict: The state with the added keys.
+        """
+        token = results.get('token', '?')
+        cams = self.cam_names or list(results['images'])
+        imgs, paths, mats = [], [], dict(cam2img=[], lidar2cam=[], cam2ego=[])
+        for cam in cams:
+            if cam not in results['images']:
+                raise ValueError(f'sample {token} has no {cam} image; it '
+                                 f'has {sorted(results["images"])}')
+            info = results['images'][cam]
+            path = info['img_path']
+            raw = _read_bytes(path, f'{cam} image of sample {token}',
+                              self.backend_args)
+            img = mmcv.imfrombytes(raw, flag=self.color_type)
+            if img is None:
+                raise ValueError(f'{cam} image of sample {token} cannot be '
+                                 f'decoded: {path}')
+            if imgs and img.shape != imgs[0].shape:
+                raise ValueError(
+                    f'{cam} image {path} has shape {img.shape}, expected '
+                    f'{imgs[0].shape} like {paths[0]}')
+            imgs.append(img.astype(np.float32) if self.to_float32 else img)
+            paths.append(path)
+            for key in mats:
+                mats[key].append(_pad44(info[key]))
+        results['img'] = imgs
+        results['img_path'] = paths
+        results['cam_names'] = cams
+        results['num_views'] = len(cams)
+        shape = imgs[0].shape[:2] if imgs else (0, 0)
+        results['ori_shape'] = results['img_shape'] = shape
+        results['pad_shape'] = shape
+        for key, value in mats.items():
+            results[key] = np.stack(value) if value else np.zeros((0, 4, 4))
+        results['img_aug_matrix'] = np.tile(np.eye(4), (len(cams), 1, 1))
+        refresh_lidar2img(results)
+        return results
+
+    def __repr__(self) -> str:
+        """str: The transform and its arguments."""
+        return (f'{self.__class__.__name__}(cam_names={self.cam_names}, '
+                f'to_float32={self.to_float32}, '
+                f'color_type={self.color_type!r})')
+
+
+@TRANSFORMS.register_module()
+class LoadOccupancyGT(BaseTransform):
+    """Load a SurroundOcc or Occ3D occupancy label as a dense grid.
+
+    * SurroundOcc ``.npy``: (M, 4) integer rows ``x, y, z, label`` of the
+      occupied voxels; unlisted voxels get 0 (``empty``), label 0
+      (``noise``) becomes ``ignore_index``.
+    * Occ3D ``labels.npz``: ``semantics`` (0 others .. 17 free) and the
+      visibility masks ``mask_lidar`` / ``mask_camera``.
+
+    Args:
+        occ_format (str, optional): ``'surroundocc'`` or ``'occ3d'``.
+            Defaults to ``results['occ_format']`` (set by the dataset).
+        mask_with (str, optional): ``'camera'`` or ``'lidar'``: Occ3D voxels
+            outside that visibility mask become ``ignore_index`` (the Occ3D
+            camera-only protocol). Defaults to None (masks only returned).
+        ignore_index (int): Label of ignored voxels. Defaults to 255.
+
+    Required Keys:
+
+    - occ_path (str): The label file.
+    - occ_format (str, optional)
+
+    Added Keys:
+
+    - gt_occ (np.ndarray): Shape (X, Y, Z), uint8.
+    - mask_camera, mask_lidar (np.ndarray): Shape (X, Y, Z), bool (Occ3D).
+    - occ_pc_range (np.ndarray): Shape (6,), the grid's metric range.
+    - occ_voxel_size (np.ndarray): Shape (3,).
+    """
+
+    def __init__(self,
+                 occ_format: Optional[str] = None,
+                 mask_with: Optional[str] = None,
+                 ignore_index: int = IGNORE_INDEX) -> None:
+        if occ_format is not None and occ_format not in OCC_FORMATS:
+            raise ValueError(f'occ_format must be one of '
+                             f'{sorted(OCC_FORMATS)}, got {occ_format!r}')
+        if mask_with not in (None, 'camera', 'lidar'):
+            raise ValueError("mask_with must be None, 'camera' or 'lidar', "
+                             f'got {mask_with!r}')
+        self.occ_format = occ_format
+        self.mask_with = mask_with
+        self.ignore_index = ignore_index
+
+    def _surroundocc(self, raw: bytes, path: str, grid) -> dict:
+        try:
+            arr = np.load(io.BytesIO(raw), allow_pickle=False)
+        except ValueError as err:
+            raise ValueError(f'SurroundOcc label {path} is not a .npy array '
+                             f'({err})') from None
+        if arr.ndim != 2 or arr.shape[1] != 4 \
+                or not np.issubdtype(arr.dtype, np.integer):
+            raise ValueError(
+                f'SurroundOcc label {path}: expected an integer (M, 4) array '
+                f'of x, y, z, label rows, got {arr.dtype} {arr.shape}')
+        xyz, label = arr[:, :3], arr[:, 3]
+        if len(arr) and ((xyz < 0).any() or (xyz >= grid).any()
+                         or label.min() < 0
+                         or label.max() > len(OCC_CLASS_NAMES)):
+            raise ValueError(
+                f'SurroundOcc label {path}: voxel indices must lie in '
+                f'[0, {tuple(grid)}) and labels in 0..{len(OCC_CLASS_NAMES)}'
+                f', got indices {xyz.min(0)}..{xyz.max(0)} and labels '
+                f'{label.min()}..{label.max()}')
+        gt = np.zeros(tuple(grid), dtype=np.uint8)
+        label = np.where(label == 0, self.ignore_index, label)
+        gt[xyz[:, 0], xyz[:, 1], xyz[:, 2]] = label
+        return dict(gt_occ=gt)
+
+    def _occ3d(self, raw: bytes, path: str, grid) -> dict:
+        try:
+            npz = np.load(io.BytesIO(raw), allow_pickle=False)
+            arrays = {k: npz[k] for k in npz.files}
+        except (ValueError, OSError) as err:
+            raise ValueError(f'Occ3D label {path} is not an .npz archive '
+                             f'({err})') from None
+        out = {}
+        for key in ('semantics', 'mask_lidar', 'mask_camera'):
+            if key not in arrays:
+                raise ValueError(f'Occ3D label {path}: expected the arrays '
+                                 "semantics, mask_lidar, mask_camera, got "
+                                 f'{sorted(arrays)}')
+            arr = arrays[key]
+            if arr.shape != tuple(grid) or not (
+                    np.issubdtype(arr.dtype, np.integer)
+                    or arr.dtype == np.bool_):
+                raise ValueError(
+                    f'Occ3D label {path}: {key} must be an integer or bool '
+                    f'array of shape {tuple(grid)}, got {arr.dtype} '
+                    f'{arr.shape}')
+            out[key] = arr
+        sem = out['semantics']
+        if sem.size and (sem.min() < 0 or sem.max() > 17):
+            raise ValueError(f'Occ3D label {path}: semantics must lie in '
+                             f'0..17, got {sem.min()}..{sem.max()}')
+        result = dict(
+            gt_occ=sem.astype(np.uint8),
+            mask_lidar=out['mask_lidar'].astype(bool),
+            mask_camera=out['mask_camera'].astype(bool))
+        if self.mask_with is not None:
+            hidden = ~result[f'mask_{self.mask_with}']
+            result['gt_occ'][hidden] = self.ignore_index
+        return result
+
+    def transform(self, results: dict) -> dict:
+        """Load the label of one sample.
+
+        Args:
+            results (dict): Pipeline state.
+
+        Returns:
+            dict: The state with the added keys.
+        """
+        fmt = self.occ_format or results.get('occ_format')
+        if fmt not in OCC_FORMATS:
+            raise ValueError('LoadOccupancyGT needs occ_format (argument or '
+                             f'results["occ_format"]), got {fmt!r}')
+        spec = OCC_FORMATS[fmt]
+        path = results.get('occ_path')
+        if path is None:
+            raise ValueError(
+                f'sample {results.get("token", "?")} has no {fmt} occupancy '
+                f'label in {results.get("ann_file", "its info file")}')
+        raw = _read_bytes(path, f'{fmt} occupancy label', None)
+        grid = np.asarray(spec.grid_size)
+        loaded = self._surroundocc(raw, path, grid) if fmt == 'surroundocc' \
+            else self._occ3d(raw, path, grid)
+        results.update(loaded)
+        results['occ_pc_range'] = np.asarray(spec.point_cloud_range)
+        results['occ_voxel_size'] = np.asarray(spec.voxel_size)
+        return results
+
+    def __repr__(self) -> str:
+        """str: The transform and its arguments."""
+        return (f'{self.__class__.__name__}(occ_format={self.occ_format!r}, '
+                f'mask_with={self.mask_with!r}, '
+                f'ignore_index={self.ignore_index})')
+
+
+@TRANSFORMS.register_module()
+class LoadLidarSegLabels(BaseTransform):
+    """Load nuScenes-lidarseg point labels as the 16 occupancy classes.
+
+    The ``.bin`` holds one uint8 raw class (0..31) per key-frame point; it
+    is mapped with the lidarseg challenge table to 1..16, and the classes
+    the challenge ignores (``noise`` etc.) become ``ignore_index``, so that
+    point labels share the label values of the occupancy grids. Apply it
+    after the key frame is loaded and before sweeps are merged.
+
+    Args:
+        ignore_index (int): Label of ignored points. Defaults to 255.
+        backend_args (dict, optional): mmengine file backend arguments.
+
+    Required Keys:
+
+    - pts_semantic_mask_path (str)
+    - points (BasePoints, optional): Key frame, to check the count.
+
+    Added Keys:
+
+    - pts_semantic_mask (np.ndarray): Shape (P,), int64.
+    """
+
+    def __init__(self,
+                 ignore_index: int = IGNORE_INDEX,
+                 backend_args: Optional[dict] = None) -> None:
+        self.ignore_index = ignore_index
+        self.backend_args = backend_args
+
+    def transform(self, results: dict) -> dict:
+        """Load the labels of one sample.
+
+        Args:
+            results (dict): Pipeline state.
+
+        Returns:
+            dict: The state with ``pts_semantic_mask``.
+        """
+        path = results.get('pts_semantic_mask_path')
+        if path is None:
+            raise ValueError(
+                f'sample {results.get("token", "?")} has no lidarseg label in'
+                f' {results.get("ann_file", "its info file")}')
+        raw = _read_bytes(path, 'lidarseg label', self.backend_args)
+        labels = lidarseg_to_occ16(np.frombuffer(raw, np.uint8), path)
+        if 'points' in results and len(labels) != len(results['points']):
+            raise ValueError(
+                f'lidarseg label {path} has {len(labels)} labels, expected '
+                f'one per key-frame point ({len(results["points"])} in '
+                f'{results.get("lidar_path")}); load labels before merging '
+                'sweeps')
+        labels = labels.astype(np.int64)
+        labels[labels == 0] = self.ignore_index
+        results['pts_semantic_mask'] = labels
+        return results
+
+    def __repr__(self) -> str:
+        """str: The transform and its arguments."""
+        return f'{self.__class__.__name__}(ignore_index={self.ignore_index})'
