@@ -1,0 +1,154 @@
+"""Point <-> voxel transfers of SPVCNN's point-voxel convolution.
+
+Implements the two bridges of SPVConv (Tang et al., ECCV 2020, "Searching
+Efficient 3D Architectures with Sparse Point-Voxel Convolution",
+sec. 3.2): points to voxels by averaging the points of each voxel, and
+voxels to points by trilinear interpolation of the eight nearest voxel
+centres. Both work on any device and are differentiable with respect to
+the features.
+"""
+import itertools
+from typing import Optional
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+from .rulebook import CoordIndex, in_bounds, linearize
+from .sparse_tensor import SparseTensor
+
+
+def scatter_mean(src: Tensor, index: Tensor, num_rows: int) -> Tensor:
+    """Average the rows of ``src`` that share an ``index``.
+
+    Args:
+        src (Tensor): Values. Shape (N, C).
+        index (Tensor): Target row of each value, in [0, num_rows).
+            Shape (N,).
+        num_rows (int): M.
+
+    Returns:
+        Tensor: Means; rows that receive nothing are 0. Shape (M, C).
+    """
+    total = src.new_zeros(num_rows, src.shape[1]).index_add(0, index, src)
+    counts = torch.bincount(index, minlength=num_rows).clamp(min=1)
+    return total / counts.to(src.dtype)[:, None]
+
+
+def coord_index(x: SparseTensor) -> CoordIndex:
+    """Lookup structure over the sites of a sparse tensor.
+
+    Args:
+        x (SparseTensor): Sites of shape (N, 4).
+
+    Returns:
+        CoordIndex: Maps linearised ``(batch, z, y, x)`` keys to rows.
+    """
+    return CoordIndex(
+        linearize(x.coords[:, 0], x.coords[:, 1:], x.spatial_shape))
+
+
+def voxel_rows(x: SparseTensor,
+               batch: Tensor,
+               zyx: Tensor,
+               index: Optional[CoordIndex] = None) -> Tensor:
+    """Row of ``x`` holding each point's voxel.
+
+    Args:
+        x (SparseTensor): Voxels on a (Z, Y, X) grid.
+        batch (Tensor): Sample of each point. Shape (P,).
+        zyx (Tensor): Integer voxel of each point on ``x``'s grid.
+            Shape (P, 3).
+        index (CoordIndex, optional): Prebuilt :func:`coord_index` of
+            ``x``. Defaults to None (built here).
+
+    Returns:
+        Tensor: int64 rows, -1 where the voxel is not active. Shape (P,).
+    """
+    index = coord_index(x) if index is None else index
+    inside = in_bounds(zyx, x.spatial_shape)
+    upper = torch.tensor(x.spatial_shape, device=zyx.device) - 1
+    keys = linearize(batch, torch.minimum(zyx.clamp(min=0), upper),
+                     x.spatial_shape)
+    rows = index.query(keys)
+    return torch.where(inside, rows, torch.full_like(rows, -1))
+
+
+def point_to_voxel(x: SparseTensor, point_features: Tensor,
+                   rows: Tensor) -> Tensor:
+    """Average point features into the voxels of ``x``.
+
+    Args:
+        x (SparseTensor): Target voxels (N sites).
+        point_features (Tensor): Shape (P, C).
+        rows (Tensor): Voxel row of each point, all valid (>= 0), e.g. from
+            :func:`voxel_rows`. Shape (P,).
+
+    Returns:
+        Tensor: Per-voxel mean; voxels without points get 0. Shape (N, C).
+    """
+    return scatter_mean(point_features, rows, x.num_voxels)
+
+
+def trilinear_devoxelize(x: SparseTensor,
+                         batch: Tensor,
+                         position: Tensor,
+                         index: Optional[CoordIndex] = None) -> Tensor:
+    """Interpolate voxel features at continuous point positions.
+
+    Voxel ``v`` has its centre at ``v + 0.5`` in grid units. A point at
+    ``u`` blends the eight voxels around it with trilinear weights
+    ``prod_d (1 - |u_d - 0.5 - v_d|)``; inactive voxels drop out and the
+    remaining weights are renormalised to sum to 1, so a point near the
+    surface is not pulled towards zero. The point's own voxel is one of the
+    eight and has weight >= 1/8, so the sum never vanishes when it is
+    active.
+
+    Args:
+        x (SparseTensor): Voxel features of shape (N, C).
+        batch (Tensor): Sample of each point. Shape (P,).
+        position (Tensor): Point positions in ``x``'s grid units, ordered
+            ``(z, y, x)``. Shape (P, 3).
+        index (CoordIndex, optional): Prebuilt :func:`coord_index` of
+            ``x``. Defaults to None (built here).
+
+    Returns:
+        Tensor: Interpolated features; 0 for a point with no active
+        neighbour. Shape (P, C).
+    """
+    num_points = position.shape[0]
+    if num_points == 0 or x.num_voxels == 0:
+        return x.features.new_zeros(num_points, x.num_channels)
+    index = coord_index(x) if index is None else index
+    size_z, size_y, size_x = x.spatial_shape
+    shifted = position - 0.5
+    base = torch.floor(shifted)
+    frac = (shifted - base).to(x.features.dtype)
+    base = base.long()
+    batch = batch.long()
+    x_ok = [(base[:, 2] + c >= 0) & (base[:, 2] + c < size_x) for c in (0, 1)]
+    x_weight = [1.0 - frac[:, 2], frac[:, 2]]
+    rows, weights = [], []
+    for c_z, c_y in itertools.product((0, 1), repeat=2):
+        corner_z, corner_y = base[:, 0] + c_z, base[:, 1] + c_y
+        zy_ok = (corner_z >= 0) & (corner_z < size_z) & (corner_y >= 0) & \
+            (corner_y < size_y)
+        zy_weight = (frac[:, 0] if c_z else 1.0 - frac[:, 0]) * \
+            (frac[:, 1] if c_y else 1.0 - frac[:, 1])
+        # The two x-neighbours have consecutive keys: one search for both.
+        # Keys of out-of-grid corners may alias other voxels; masked below.
+        start = ((batch * size_z + corner_z) * size_y + corner_y) * size_x \
+            + base[:, 2]
+        for c_x, found in enumerate(index.query_run(start, 2)):
+            hit = zy_ok & x_ok[c_x] & (found >= 0)
+            weights.append(
+                torch.where(hit, zy_weight * x_weight[c_x],
+                            torch.zeros_like(zy_weight)))
+            rows.append(torch.where(hit, found, torch.zeros_like(found)))
+    rows = torch.stack(rows, dim=1)
+    weights = torch.stack(weights, dim=1)
+    weights = weights / weights.sum(dim=1, keepdim=True).clamp(min=1e-12)
+    # embedding_bag sums weighted rows without materialising (P, 8, C),
+    # which at 300k points and 128 channels would be over 1 GB.
+    return F.embedding_bag(
+        rows, x.features, per_sample_weights=weights, mode='sum')

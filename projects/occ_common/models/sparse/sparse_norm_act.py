@@ -1,0 +1,132 @@
+"""Row-wise layers on sparse features: batch norm, ReLU, Linear-BN-ReLU.
+
+They act on the ``(N, C)`` feature matrix only, so they are the same for
+both backends. Normalisation is always a plain ``nn.BatchNorm1d`` child
+applied to the features, so ``SyncBatchNorm.convert_sync_batchnorm`` (the
+runner's ``sync_bn``) swaps it like any other and the model keeps working.
+"""
+import torch.distributed as dist
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+from .sparse_tensor import SparseTensor
+
+
+def batch_norm_rows(norm: nn.BatchNorm1d, features: Tensor) -> Tensor:
+    """Batch-normalise rows, tolerating fewer than two rows in training.
+
+    A sparse batch can hold zero or one active site (an empty or nearly
+    empty point cloud), where ``nn.BatchNorm1d`` raises in training mode.
+    Those batches carry no usable statistics, so they are normalised with
+    the running statistics (without updating them) and the affine
+    parameters stay in the graph.
+
+    A distributed ``SyncBatchNorm`` is always called instead: every rank
+    must join its statistics exchange, and the pooled batch is what counts.
+
+    Args:
+        norm (nn.BatchNorm1d): The normalisation layer.
+        features (Tensor): Shape (N, C).
+
+    Returns:
+        Tensor: Normalised features. Shape (N, C).
+    """
+    if not norm.training or features.shape[0] >= 2 or _synced(norm):
+        return norm(features)
+    return _running_stats_norm(norm, features)
+
+
+def _synced(norm: nn.Module) -> bool:
+    """Whether ``norm`` is a SyncBatchNorm that will talk to other ranks."""
+    return isinstance(norm, nn.SyncBatchNorm) and dist.is_available() and \
+        dist.is_initialized() and dist.get_world_size() > 1
+
+
+def _running_stats_norm(norm: nn.BatchNorm1d, features: Tensor) -> Tensor:
+    """Normalise with running statistics only; see :func:`batch_norm_rows`.
+    """
+    if norm.running_mean is not None:
+        return F.batch_norm(
+            features,
+            norm.running_mean,
+            norm.running_var,
+            norm.weight,
+            norm.bias,
+            training=False,
+            eps=norm.eps)
+    if norm.affine:
+        return features * norm.weight + norm.bias
+    return features
+
+
+class SparseBatchNorm(nn.Module):
+    """Batch norm over the active sites of a :class:`SparseTensor`.
+
+    Statistics are taken over all active sites of the batch, as in spconv
+    networks (``nn.BatchNorm1d`` on ``x.features``); see
+    :func:`batch_norm_rows` for batches of fewer than two sites.
+
+    Args:
+        num_features (int): Channels C.
+        eps (float): Added to the variance. Defaults to 1e-5.
+        momentum (float): Running statistics momentum. Defaults to 0.1.
+    """
+
+    def __init__(self,
+                 num_features: int,
+                 eps: float = 1e-5,
+                 momentum: float = 0.1) -> None:
+        super().__init__()
+        self.bn = nn.BatchNorm1d(num_features, eps=eps, momentum=momentum)
+
+    def forward(self, x: SparseTensor) -> SparseTensor:
+        """Normalise the features.
+
+        Args:
+            x (SparseTensor): Features of shape (N, C).
+
+        Returns:
+            SparseTensor: Same sites, normalised features. Shape (N, C).
+        """
+        return x.replace_feature(batch_norm_rows(self.bn, x.features))
+
+
+class SparseReLU(nn.Module):
+    """ReLU on the features of a :class:`SparseTensor` (never in place, as
+    the input tensor may still be used by a residual branch)."""
+
+    def forward(self, x: SparseTensor) -> SparseTensor:
+        """Apply ReLU.
+
+        Args:
+            x (SparseTensor): Features of shape (N, C).
+
+        Returns:
+            SparseTensor: Same sites. Shape (N, C).
+        """
+        return x.replace_feature(F.relu(x.features))
+
+
+class LinearBNReLU(nn.Module):
+    """Per-row ``Linear -> BatchNorm1d -> ReLU``, SPVCNN's point MLP unit.
+
+    Args:
+        in_channels (int): Input channels.
+        out_channels (int): Output channels.
+    """
+
+    def __init__(self, in_channels: int, out_channels: int) -> None:
+        super().__init__()
+        self.linear = nn.Linear(in_channels, out_channels)
+        self.norm = nn.BatchNorm1d(out_channels)
+
+    def forward(self, features: Tensor) -> Tensor:
+        """Transform row features.
+
+        Args:
+            features (Tensor): Shape (N, C_in).
+
+        Returns:
+            Tensor: Shape (N, C_out).
+        """
+        return F.relu(batch_norm_rows(self.norm, self.linear(features)))

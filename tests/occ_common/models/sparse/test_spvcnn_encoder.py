@@ -1,0 +1,228 @@
+"""Tests of SPVCNNEncoder on an 8x8x4 grid of 1 m voxels.
+
+The tiny configuration: range (0, 0, 0, 8, 8, 4), stem 4 channels, stages
+(8, 8) with strides (2, 1) -> last stage 4x4x2 voxels of 2 m, BEV 4x4 cells
+of 2 m, 6 output channels.
+"""
+import copy
+
+import pytest
+import torch
+from torch import nn
+
+from projects.occ_common.models.sparse import SPVCNNEncoder
+
+
+def _spconv_runs_on_cpu():
+    """Whether a tiny spconv submanifold conv runs on CPU."""
+    try:
+        import spconv.pytorch as spconv
+        x = spconv.SparseConvTensor(
+            torch.ones(1, 1), torch.zeros(1, 4, dtype=torch.int32),
+            [1, 1, 1], 1)
+        spconv.SubMConv3d(1, 1, 3)(x)
+    except Exception:  # missing or unusable spconv
+        return False
+    return True
+
+
+def _encoder(**kwargs):
+    cfg = dict(
+        in_channels=4,
+        voxel_size=(1.0, 1.0, 1.0),
+        point_cloud_range=(0.0, 0.0, 0.0, 8.0, 8.0, 4.0),
+        base_channels=4,
+        stage_channels=(8, 8),
+        stage_strides=(2, 1),
+        bev_shape=(4, 4),
+        out_channels=6,
+        backend='torch')
+    cfg.update(kwargs)
+    torch.manual_seed(0)
+    return SPVCNNEncoder(**cfg)
+
+
+def _cloud(num, seed, columns=4):
+    """``num`` points uniformly inside the range, intensity in [0, 1)."""
+    gen = torch.Generator().manual_seed(seed)
+    scale = torch.tensor([8.0, 8.0, 4.0] + [1.0] * (columns - 3))
+    return torch.rand(num, columns, generator=gen) * scale
+
+
+def test_forward_backward_shapes_and_gradients():
+    """Two samples (30 and 20 points, plus 3 outside the range): BEV
+    (2, 6, 4, 4) >= 0 (ReLU then max), bool mask (2, 1, 4, 4), and every
+    parameter receives a finite gradient."""
+    enc = _encoder()
+    outside = torch.tensor([[9., 1., 1., 0.], [1., 1., -0.5, 0.],
+                            [1., 8., 1., 0.]])
+    out = enc([torch.cat([_cloud(30, 0), outside]), _cloud(20, 1)])
+    bev, mask = out['bev'], out['bev_mask']
+    assert bev.shape == (2, 6, 4, 4) and mask.shape == (2, 1, 4, 4)
+    assert mask.dtype == torch.bool
+    assert bool(torch.isfinite(bev).all()) and bool((bev >= 0).all())
+    (bev * torch.randn_like(bev)).sum().backward()
+    for name, param in enc.named_parameters():
+        assert param.grad is not None, name
+        assert bool(torch.isfinite(param.grad).all()), name
+
+
+def test_bev_mask_by_hand():
+    """Cell = floor(voxel centre / 2 m) per axis, (row y, column x):
+    sample 0: (0.5, 0.5, 0.5) -> voxel (0, 0) -> cell (0, 0);
+    (1.2, 0.3, 3.5) -> voxel (1, 0) -> centre (1.5, 0.5) -> cell (0, 0);
+    (5.5, 2.5, 1.0) -> centre (5.5, 2.5) -> cell (y1, x2);
+    (7.9, 7.9, 3.9) -> cell (3, 3); (9, 1, 1) and (1, 1, 4.0) lie outside
+    (x >= 8, z >= 4) and are dropped.
+    sample 1: (3.0, 6.0, 0.0) -> centre (3.5, 6.5) -> cell (y3, x1).
+    Features may be non-zero only where the mask is True."""
+    enc = _encoder()
+    sample0 = torch.tensor([[0.5, 0.5, 0.5, 0.1], [1.2, 0.3, 3.5, 0.2],
+                            [5.5, 2.5, 1.0, 0.3], [7.9, 7.9, 3.9, 0.4],
+                            [9.0, 1.0, 1.0, 0.5], [1.0, 1.0, 4.0, 0.6]])
+    sample1 = torch.tensor([[3.0, 6.0, 0.0, 0.7]])
+    out = enc([sample0, sample1])
+    expected = torch.zeros(2, 1, 4, 4, dtype=torch.bool)
+    for b, y, x in ((0, 0, 0), (0, 1, 2), (0, 3, 3), (1, 3, 1)):
+        expected[b, 0, y, x] = True
+    assert torch.equal(out['bev_mask'], expected)
+    active = out['bev'].abs().sum(dim=1, keepdim=True) > 0
+    assert not bool((active & ~expected).any())
+
+
+def test_empty_point_cloud():
+    """No points at all: zero BEV, all-False mask, and backward still
+    reaches every parameter (with zero gradient)."""
+    enc = _encoder()
+    out = enc([torch.zeros(0, 4), torch.zeros(0, 5)])
+    assert out['bev'].shape == (2, 6, 4, 4)
+    assert out['bev'].abs().sum().item() == 0.
+    assert not bool(out['bev_mask'].any())
+    out['bev'].sum().backward()
+    conv_weight = enc.stem[0].conv.weight
+    assert conv_weight.grad is not None
+    assert torch.count_nonzero(conv_weight.grad) == 0
+
+
+def test_batch_with_one_empty_sample():
+    """A batch [cloud, empty] equals [cloud] alone for sample 0 (eval mode,
+    and in training the empty sample adds no rows to the batch norms);
+    sample 1 is zero with an all-False mask. Backward runs in training."""
+    enc = _encoder().eval()
+    cloud = _cloud(25, 2)
+    both = enc([cloud, torch.zeros(0, 4)])
+    alone = enc([cloud])
+    torch.testing.assert_close(both['bev'][0], alone['bev'][0])
+    assert torch.equal(both['bev_mask'][0], alone['bev_mask'][0])
+    assert both['bev'][1].abs().sum().item() == 0.
+    assert not bool(both['bev_mask'][1].any())
+    enc.train()
+    first_empty = enc([torch.zeros(0, 4), cloud])
+    first_empty['bev'].sum().backward()
+    assert first_empty['bev'][0].abs().sum().item() == 0.
+    assert enc.bev_proj.linear.weight.grad.abs().sum().item() > 0
+
+
+def test_sync_batchnorm_conversion():
+    """convert_sync_batchnorm (the runner's sync_bn) swaps every norm for a
+    SyncBatchNorm; without a process group it computes plain batch norm,
+    so the converted copy gives the same training-mode BEV, also for a
+    batch whose only sample is empty."""
+    enc = _encoder()
+    synced = nn.SyncBatchNorm.convert_sync_batchnorm(copy.deepcopy(enc))
+    assert isinstance(synced.stem[0].norm, nn.SyncBatchNorm)
+    assert isinstance(synced.point_mlps[0].norm, nn.SyncBatchNorm)
+    cloud = [_cloud(30, 8)]
+    torch.testing.assert_close(synced(cloud)['bev'], enc(cloud)['bev'])
+    empty = synced([torch.zeros(0, 4)])
+    assert empty['bev'].abs().sum().item() == 0.
+
+
+def test_point_order_does_not_matter():
+    """Shuffling the points of a sample leaves the BEV unchanged (eval)."""
+    enc = _encoder().eval()
+    cloud = _cloud(40, 3)
+    shuffled = cloud[torch.randperm(40, generator=torch.Generator()
+                                    .manual_seed(5))]
+    torch.testing.assert_close(enc([cloud])['bev'], enc([shuffled])['bev'])
+
+
+def test_concat_reduction_and_five_columns():
+    """bev_reduce='concat' stacks the 2 height levels of 8 channels (16)
+    and mixes them to 6; five input columns with in_channels=5 work."""
+    enc = _encoder(bev_reduce='concat', in_channels=5)
+    assert enc.bev_proj[0].in_channels == 16
+    out = enc([_cloud(20, 4, columns=5)])
+    assert out['bev'].shape == (1, 6, 4, 4)
+    out['bev'].sum().backward()
+    assert enc.bev_proj[0].weight.grad is not None
+
+
+def test_config_errors():
+    """Inconsistent configurations raise ValueError naming the problem."""
+    with pytest.raises(ValueError, match='coarser than the BEV cells'):
+        _encoder(stage_strides=(2, 2))
+    with pytest.raises(ValueError, match="'concat' needs the last stage"):
+        _encoder(bev_reduce='concat', bev_shape=(8, 8))
+    with pytest.raises(ValueError, match='in_channels must be >= 3'):
+        _encoder(in_channels=2)
+    with pytest.raises(ValueError, match='one stride >= 1 per stage'):
+        _encoder(stage_strides=(2, ))
+    with pytest.raises(ValueError, match='blocks_per_stage'):
+        _encoder(blocks_per_stage=0)
+    with pytest.raises(ValueError, match='bev_reduce must be one of'):
+        _encoder(bev_reduce='min')
+    with pytest.raises(ValueError, match='point_cloud_range'):
+        _encoder(point_cloud_range=(0, 0, 0, 8, 8))
+    with pytest.raises(ValueError, match='backend must be one of'):
+        _encoder(backend='cuda')
+
+
+def test_bad_points_input():
+    """Points must be a non-empty list of float (N, >= in_channels)
+    tensors; errors name the offending sample."""
+    enc = _encoder()
+    with pytest.raises(ValueError, match='non-empty list or tuple'):
+        enc(torch.zeros(5, 4))
+    with pytest.raises(ValueError, match='non-empty list or tuple'):
+        enc([])
+    with pytest.raises(ValueError, match=r'sample 1: .*\(N, >= 4\)'):
+        enc([_cloud(3, 0), torch.zeros(5, 3)])
+    with pytest.raises(ValueError, match='sample 0'):
+        enc([torch.zeros(5, 4, dtype=torch.long)])
+
+
+def test_default_sdg_occ_geometry_and_registry():
+    """Defaults: 0.1 m voxels over 80 x 80 x 6.4 m -> grid (Z, Y, X) =
+    (64, 800, 800) (6.4 / 0.1 = 64 despite float error), strides 2 * 2 = 4
+    -> 0.4 m, one voxel per 200x200 BEV cell of 80 / 200 = 0.4 m. The
+    registry builds the same class."""
+    from mmdet3d.registry import MODELS
+    enc = MODELS.build(dict(type='SPVCNNEncoder'))
+    assert isinstance(enc, SPVCNNEncoder)
+    assert enc.grid_shape == (64, 800, 800)
+    assert enc.total_stride == 4
+    assert enc.bev_cell == pytest.approx((0.4, 0.4))
+    assert enc.bev_shape == (200, 200)
+
+
+@pytest.mark.skipif(not _spconv_runs_on_cpu(),
+                    reason='spconv cannot run on CPU here')
+def test_spconv_and_torch_backends_agree():
+    """With the same state dict, the spconv backend's forward (CPU) equals
+    the torch backend's, in eval mode, including an empty sample."""
+    ours = _encoder(backend='torch').eval()
+    theirs = _encoder(backend='spconv').eval()
+    theirs.load_state_dict(ours.state_dict())
+    points = [_cloud(40, 6), torch.zeros(0, 4), _cloud(15, 7)]
+    threads = torch.get_num_threads()
+    # spconv's CPU strided conv races with several threads (see
+    # test_sparse_conv_parity.single_thread).
+    torch.set_num_threads(1)
+    try:
+        out_a, out_b = ours(points), theirs(points)
+    finally:
+        torch.set_num_threads(threads)
+    torch.testing.assert_close(out_a['bev'], out_b['bev'], rtol=1e-5,
+                               atol=1e-5)
+    assert torch.equal(out_a['bev_mask'], out_b['bev_mask'])
