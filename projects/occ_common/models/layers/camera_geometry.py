@@ -1,0 +1,197 @@
+"""Camera geometry shared by the depth-lifting models.
+
+Conventions (those of mmdet3d 1.x ``lidar2img``):
+
+* Pixel coordinates are continuous and pixel ``i`` covers ``[i, i + 1)`` (as
+  in the depth maps of ``projects.occ_common.transforms``), so a stride-``s``
+  feature cell ``j`` is centred on ``(j + 0.5) * s``.
+* All matrices are homogeneous 4x4. ``cam2img`` is the padded intrinsic
+  matrix, ``lidar2cam`` the extrinsic and ``img_aug_matrix`` the image
+  augmentation; the full projection ``img_aug @ cam2img @ lidar2cam`` maps a
+  LiDAR point ``(x, y, z, 1)`` to ``(u * d, v * d, d, 1)`` where ``(u, v)`` is
+  the augmented pixel and ``d`` the depth along the optical axis. Lifting a
+  pixel at depth ``d`` back to 3D inverts this same matrix, so projection and
+  lifting can never disagree.
+* Depth bins follow :class:`DepthBCELoss` (BEVDepth): ``(min, max, step)``
+  gives ``D = round((max - min) / step)`` bins, bin ``k`` covering
+  ``[min + k * step, min + (k + 1) * step)`` and lifted at its near edge
+  ``min + k * step``. OccCylindrical's 50 bins "from 1 m to 50 m" at
+  d = 1 m are therefore ``(1, 51, 1)``.
+"""
+from typing import Sequence, Tuple
+
+import torch
+from torch import Tensor
+
+from ..losses.depth_bce_loss import num_depth_bins
+from .cylindrical_coords import cartesian_to_cylindrical
+
+
+def depth_bin_values(depth_bound: Sequence[float]) -> Tensor:
+    """Depth of every bin, ``min + k * step``.
+
+    Args:
+        depth_bound (Sequence[float]): ``(min, max, step)`` in metres.
+
+    Returns:
+        Tensor: Depths in metres. Shape (D,).
+    """
+    num = num_depth_bins(depth_bound)
+    d_min, step = float(depth_bound[0]), float(depth_bound[2])
+    return d_min + step * torch.arange(num, dtype=torch.float32)
+
+
+def create_frustum(img_shape: Sequence[int], feat_shape: Sequence[int],
+                   depth_bound: Sequence[float]) -> Tensor:
+    """Augmented-image pixel and depth of every feature cell and depth bin.
+
+    Args:
+        img_shape (Sequence[int]): Network input ``(H, W)``.
+        feat_shape (Sequence[int]): Feature map ``(h, w)``.
+        depth_bound (Sequence[float]): ``(min, max, step)`` in metres.
+
+    Returns:
+        Tensor: ``(u, v, d)`` per bin and cell. Shape (D, h, w, 3).
+    """
+    img_h, img_w = int(img_shape[0]), int(img_shape[1])
+    feat_h, feat_w = int(feat_shape[0]), int(feat_shape[1])
+    if min(img_h, img_w, feat_h, feat_w) <= 0:
+        raise ValueError('create_frustum needs positive sizes, got image '
+                         f'{tuple(img_shape)} and features '
+                         f'{tuple(feat_shape)}')
+    depths = depth_bin_values(depth_bound)
+    # Cell centres in pixel units; the stride may differ per axis when the
+    # image size is not a multiple of the feature size.
+    us = (torch.arange(feat_w) + 0.5) * (img_w / feat_w)
+    vs = (torch.arange(feat_h) + 0.5) * (img_h / feat_h)
+    d, v, u = torch.meshgrid(depths, vs, us, indexing='ij')
+    return torch.stack([u, v, d], dim=-1)
+
+
+def lidar2img_matrix(cam2img: Tensor, lidar2cam: Tensor,
+                     img_aug_matrix: Tensor) -> Tensor:
+    """Full projection ``img_aug @ cam2img @ lidar2cam``.
+
+    Args:
+        cam2img (Tensor): Intrinsics. Shape (..., 4, 4).
+        lidar2cam (Tensor): Extrinsics. Shape (..., 4, 4).
+        img_aug_matrix (Tensor): Image augmentation. Shape (..., 4, 4).
+
+    Returns:
+        Tensor: Projection. Shape (..., 4, 4).
+    """
+    for name, mat in (('cam2img', cam2img), ('lidar2cam', lidar2cam),
+                      ('img_aug_matrix', img_aug_matrix)):
+        if mat.shape[-2:] != (4, 4):
+            raise ValueError(f'{name} must be (..., 4, 4), got '
+                             f'{tuple(mat.shape)}')
+    return img_aug_matrix @ cam2img @ lidar2cam
+
+
+def frustum_to_lidar(frustum: Tensor, lidar2img: Tensor) -> Tensor:
+    """Lift every frustum point ``(u, v, d)`` into the LiDAR frame.
+
+    Args:
+        frustum (Tensor): From :func:`create_frustum`. Shape (D, h, w, 3).
+        lidar2img (Tensor): Full projections. Shape (B, N, 4, 4).
+
+    Returns:
+        Tensor: LiDAR-frame points. Shape (B, N, D, h, w, 3).
+    """
+    if lidar2img.dim() != 4 or lidar2img.shape[-2:] != (4, 4):
+        raise ValueError('lidar2img must be (B, N, 4, 4), got '
+                         f'{tuple(lidar2img.shape)}')
+    frustum = frustum.to(lidar2img)
+    u, v, d = frustum.unbind(-1)
+    homo = torch.stack([u * d, v * d, d, torch.ones_like(d)], dim=-1)
+    # Inverting in float64 keeps the far (50 m) bins accurate.
+    img2lidar = torch.linalg.inv(lidar2img.double()).to(lidar2img.dtype)
+    pts = torch.einsum('bnij,dhwj->bndhwi', img2lidar, homo)
+    return pts[..., :3]
+
+
+def project_points(points: Tensor,
+                   lidar2img: Tensor,
+                   eps: float = 1e-5) -> Tuple[Tensor, Tensor]:
+    """Project LiDAR-frame points into every camera.
+
+    Args:
+        points (Tensor): Points. Shape (P, 3).
+        lidar2img (Tensor): Full projections. Shape (N, 4, 4).
+        eps (float): Smallest depth counted as in front of the camera.
+            Defaults to 1e-5.
+
+    Returns:
+        tuple[Tensor, Tensor]: Augmented pixel ``(u, v)``, shape (N, P, 2)
+        (undefined where the depth is not positive), and depth, shape (N, P).
+    """
+    if points.dim() != 2 or points.shape[1] != 3:
+        raise ValueError(f'points must be (P, 3), got {tuple(points.shape)}')
+    homo = torch.cat([points, points.new_ones(points.shape[0], 1)], dim=1)
+    proj = torch.einsum('nij,pj->npi', lidar2img.to(points), homo)
+    depth = proj[..., 2]
+    uv = proj[..., :2] / depth.clamp(min=eps).unsqueeze(-1)
+    return uv, depth
+
+
+def cylindrical_position_embedding(points: Tensor,
+                                   cyl_range: Sequence[float]) -> Tensor:
+    """Normalised cylindrical coordinates of the frustum: ``V_coord`` (eq. 5).
+
+    Each bin's LiDAR-frame point is converted to ``(r, theta, z)`` and scaled
+    to ``[0, 1]`` by the cylinder range (values outside the range go beyond
+    ``[0, 1]`` unchanged so the network still sees them). The ``D`` bins are
+    stacked on channels, as in PETR's 3D position embedding.
+
+    Args:
+        points (Tensor): From :func:`frustum_to_lidar`.
+            Shape (B, N, D, h, w, 3).
+        cyl_range (Sequence[float]): ``(r_min, theta_min, z_min, r_max,
+            theta_max, z_max)``.
+
+    Returns:
+        Tensor: Embedding. Shape (B * N, D * 3, h, w), channel ``3 * k + i``
+        holding coordinate ``i`` of bin ``k``.
+    """
+    if points.dim() != 6 or points.shape[-1] != 3:
+        raise ValueError('points must be (B, N, D, h, w, 3), got '
+                         f'{tuple(points.shape)}')
+    if len(cyl_range) != 6:
+        raise ValueError(f'cyl_range must have 6 values, got {cyl_range}')
+    lo = points.new_tensor(cyl_range[:3])
+    hi = points.new_tensor(cyl_range[3:])
+    if bool((hi <= lo).any()):
+        raise ValueError(f'cyl_range needs max > min per axis: {cyl_range}')
+    cyl = (cartesian_to_cylindrical(points) - lo) / (hi - lo)
+    b, n, d, h, w, _ = cyl.shape
+    return cyl.permute(0, 1, 2, 5, 3, 4).reshape(b * n, d * 3, h, w)
+
+
+def camera_parameter_vector(cam2img: Tensor, lidar2cam: Tensor,
+                            img_aug_matrix: Tensor) -> Tensor:
+    """Per-camera parameters for BEVDepth's camera-aware depth prediction.
+
+    Concatenates ``fx, fy, cx, cy``, the 2x2 image-augmentation block and its
+    pixel translation, and the 3x4 camera-to-LiDAR transform.
+
+    Args:
+        cam2img (Tensor): Intrinsics. Shape (B, N, 4, 4).
+        lidar2cam (Tensor): Extrinsics. Shape (B, N, 4, 4).
+        img_aug_matrix (Tensor): Image augmentation. Shape (B, N, 4, 4).
+
+    Returns:
+        Tensor: Parameters. Shape (B, N, 22).
+    """
+    intr = torch.stack([
+        cam2img[..., 0, 0], cam2img[..., 1, 1], cam2img[..., 0, 2],
+        cam2img[..., 1, 2]
+    ],
+                       dim=-1)
+    aug_rot = img_aug_matrix[..., :2, :2].flatten(-2)
+    # The pixel shift sits in column 2 (it multiplies the depth) under the
+    # projective convention; column 3 is added for matrices that use it.
+    aug_trans = img_aug_matrix[..., :2, 2] + img_aug_matrix[..., :2, 3]
+    cam2lidar = torch.linalg.inv(lidar2cam.double()).to(lidar2cam.dtype)
+    return torch.cat(
+        [intr, aug_rot, aug_trans, cam2lidar[..., :3, :].flatten(-2)],
+        dim=-1)

@@ -1,0 +1,134 @@
+"""Tests of the frustum, projection and position-embedding helpers."""
+import math
+
+import pytest
+import torch
+
+from projects.occ_common.models.layers import (camera_parameter_vector,
+                                               create_frustum,
+                                               cylindrical_position_embedding,
+                                               depth_bin_values,
+                                               frustum_to_lidar,
+                                               lidar2img_matrix,
+                                               project_points)
+from projects.occ_common.testing.occ_inputs import ring_camera_rig
+
+
+def test_depth_bins_follow_the_paper_counts():
+    """(1, 51, 1) -> 50 bins 1..50 m (6 x 50 x 58 x 100 points, Table VI);
+    (1, 51, 2) -> 25 bins 1, 3, ..., 49; (1, 51, 10) -> 1, 11, 21, 31, 41."""
+    assert depth_bin_values((1, 51, 1)).tolist() == list(range(1, 51))
+    assert depth_bin_values((1, 51, 2)).tolist() == list(range(1, 50, 2))
+    assert depth_bin_values((1, 51, 10)).tolist() == [1, 11, 21, 31, 41]
+    with pytest.raises(ValueError, match='depth_bound'):
+        depth_bin_values((1, 51))
+
+
+def test_frustum_cell_centres():
+    """A 4x8 image with 2x4 features has stride 2: cell (y, x) is centred on
+    pixel ((x + 0.5) * 2, (y + 0.5) * 2) = u in {1, 3, 5, 7}, v in {1, 3}
+    (pixel i covers [i, i + 1))."""
+    fr = create_frustum((4, 8), (2, 4), (2.0, 6.0, 2.0))
+    assert fr.shape == (2, 2, 4, 3)
+    assert fr[0, 0, :, 0].tolist() == [1.0, 3.0, 5.0, 7.0]
+    assert fr[0, :, 0, 1].tolist() == [1.0, 3.0]
+    assert fr[:, 0, 0, 2].tolist() == [2.0, 4.0]
+    with pytest.raises(ValueError, match='positive'):
+        create_frustum((0, 8), (2, 4), (2.0, 6.0, 2.0))
+
+
+def test_lift_then_project_round_trip():
+    """A pixel lifted at depth d projects back to the same pixel and depth.
+
+    Camera 0 of the 2-camera ring looks along +x with f = 32 and principal
+    point (32, 16) on a 32x64 image: pixel (u, v) at depth d lifts to
+    x = d, y = -(u - 32) * d / 32, z = -(v - 16) * d / 32. For the frustum
+    cell at u = 8, v = 8 (stride 16 on a 2x4 map) and d = 4:
+    (4, 3, 1).
+    """
+    cam2img, lidar2cam = ring_camera_rig(2, (32, 64), 32.0)
+    aug = torch.eye(4, dtype=torch.float64).repeat(2, 1, 1)
+    l2i = lidar2img_matrix(cam2img, lidar2cam, aug)[None]
+    frustum = create_frustum((32, 64), (2, 4), (4.0, 8.0, 2.0)).double()
+    pts = frustum_to_lidar(frustum, l2i)
+    assert pts.shape == (1, 2, 2, 2, 4, 3)
+    torch.testing.assert_close(pts[0, 0, 0, 0, 0],
+                               torch.tensor([4.0, 3.0, 1.0],
+                                            dtype=torch.float64))
+    # Camera 1 looks along -x: the same pixel lands at (-4, -3, 1).
+    torch.testing.assert_close(pts[0, 1, 0, 0, 0],
+                               torch.tensor([-4.0, -3.0, 1.0],
+                                            dtype=torch.float64))
+    uv, depth = project_points(pts[0, 0].reshape(-1, 3), l2i[0, :1])
+    torch.testing.assert_close(uv[0], frustum[..., :2].reshape(-1, 2))
+    torch.testing.assert_close(depth[0], frustum[..., 2].reshape(-1))
+
+
+def test_augmentation_is_inverted_by_the_lift():
+    """An image scaled by 2 (pixel (u, v) -> (2u, 2v)) lifts augmented pixel
+    (16, 16) at d = 4 to the point that the unaugmented pixel (8, 8) gives:
+    (4, 3, 1) for camera 0 (see the round-trip test)."""
+    cam2img, lidar2cam = ring_camera_rig(1, (32, 64), 32.0)
+    aug = torch.diag(torch.tensor([2.0, 2.0, 1.0, 1.0],
+                                  dtype=torch.float64))[None]
+    l2i = lidar2img_matrix(cam2img, lidar2cam, aug)[None]
+    frustum = torch.tensor([[[[16.0, 16.0, 4.0]]]], dtype=torch.float64)
+    pts = frustum_to_lidar(frustum, l2i)
+    torch.testing.assert_close(pts.reshape(3),
+                               torch.tensor([4.0, 3.0, 1.0],
+                                            dtype=torch.float64))
+    with pytest.raises(ValueError, match='img_aug_matrix'):
+        lidar2img_matrix(cam2img, lidar2cam, aug[:, :3, :3])
+
+
+def test_position_embedding_values_and_layout():
+    """Points (3, 4, 0) and (0, -2, 1) in a cylinder r in [0, 10],
+    theta in [-pi, pi], z in [-1, 1] normalise to
+    (0.5, (atan2(4, 3) + pi) / (2 pi), 0.5) and (0.2, 0.25, 1.0); bin k's
+    coordinate i sits in channel 3 k + i."""
+    pts = torch.tensor([[3.0, 4.0, 0.0], [0.0, -2.0, 1.0]],
+                       dtype=torch.float64)
+    pts = pts.view(1, 1, 2, 1, 1, 3)  # B, N, D=2, h, w
+    emb = cylindrical_position_embedding(pts,
+                                         (0, -math.pi, -1, 10, math.pi, 1))
+    assert emb.shape == (1, 6, 1, 1)
+    theta = (math.atan2(4, 3) + math.pi) / (2 * math.pi)
+    expected = torch.tensor([0.5, theta, 0.5, 0.2, 0.25, 1.0],
+                            dtype=torch.float64)
+    torch.testing.assert_close(emb.view(-1), expected)
+    with pytest.raises(ValueError, match='cyl_range'):
+        cylindrical_position_embedding(pts, (0, 0, 0, 1, 1))
+
+
+def test_project_points_empty_and_gradient():
+    """No points give (N, 0, 2) pixels; the projection is differentiable:
+    u = 32 - 32 y / x at camera 0, so du/dy = -32 / x = -8 at x = 4."""
+    cam2img, lidar2cam = ring_camera_rig(2, (32, 64), 32.0)
+    l2i = cam2img @ lidar2cam
+    uv, depth = project_points(torch.zeros(0, 3, dtype=torch.float64), l2i)
+    assert uv.shape == (2, 0, 2) and depth.shape == (2, 0)
+    pts = torch.tensor([[4.0, 1.0, 0.0]], dtype=torch.float64,
+                       requires_grad=True)
+    uv, _ = project_points(pts, l2i)
+    uv[0, 0, 0].backward()
+    torch.testing.assert_close(pts.grad[0, 1],
+                               torch.tensor(-8.0, dtype=torch.float64))
+    with pytest.raises(ValueError, match='points'):
+        project_points(torch.zeros(3, 2), l2i)
+
+
+def test_camera_parameter_vector():
+    """fx, fy, cx, cy = 32, 32, 32, 16; identity augmentation (rotation
+    1, 0, 0, 1 and no shift); camera 0's cam2lidar rotation has the camera
+    z axis (forward) along lidar +x: rows (0, 0, 1), (-1, 0, 0), (0, -1, 0)
+    and no translation."""
+    cam2img, lidar2cam = ring_camera_rig(2, (32, 64), 32.0)
+    aug = torch.eye(4, dtype=torch.float64).repeat(2, 1, 1)
+    vec = camera_parameter_vector(cam2img[None], lidar2cam[None], aug[None])
+    assert vec.shape == (1, 2, 22)
+    expected = torch.tensor([
+        32, 32, 32, 16, 1, 0, 0, 1, 0, 0, 0, 0, 1, 0, -1, 0, 0, 0, 0, -1,
+        0, 0
+    ],
+                            dtype=torch.float64)
+    torch.testing.assert_close(vec[0, 0], expected, atol=1e-12, rtol=0)
