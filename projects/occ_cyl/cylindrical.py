@@ -1,0 +1,146 @@
+"""The cylindrical volume ``[R, Theta, Z]`` of OccCylindrical (eqs. 4, 6-7).
+
+The conversion functions are shared with the camera geometry and live in
+``projects.occ_common.models.layers``; they are re-exported here.
+"""
+import math
+from typing import Sequence, Tuple
+
+import torch
+from torch import Tensor
+
+from projects.occ_common.models.layers import (cartesian_to_cylindrical,
+                                               cylindrical_to_cartesian)
+
+__all__ = [
+    'CylinderGrid', 'cartesian_to_cylindrical', 'cylindrical_to_cartesian'
+]
+
+
+class CylinderGrid:
+    """A uniform grid over radius, azimuth and height.
+
+    Voxel ``(i, j, k)`` covers ``r in [r_min + i * dr, r_min + (i + 1) * dr)``
+    and likewise for ``theta`` and ``z``. When the azimuth range is the full
+    circle the azimuth index wraps, so ``theta = pi`` falls in voxel 0 like
+    ``theta = -pi``. Points outside the ranges belong to no voxel (index -1):
+    they are dropped by the voxel pooling; the occupancy head instead checks
+    with :meth:`covers_box` that every output voxel lies inside.
+
+    Args:
+        grid_shape (Sequence[int]): ``(R, Theta, Z)``.
+        cyl_range (Sequence[float]): ``(r_min, theta_min, z_min, r_max,
+            theta_max, z_max)``, radii and heights in metres, angles in
+            radians.
+    """
+
+    def __init__(self, grid_shape: Sequence[int],
+                 cyl_range: Sequence[float]) -> None:
+        if len(grid_shape) != 3 or min(int(s) for s in grid_shape) < 1:
+            raise ValueError('CylinderGrid: grid_shape must be three '
+                             f'positive sizes (R, Theta, Z), got {grid_shape}')
+        if len(cyl_range) != 6:
+            raise ValueError('CylinderGrid: cyl_range must be (r_min, '
+                             'theta_min, z_min, r_max, theta_max, z_max), '
+                             f'got {cyl_range}')
+        lo, hi = list(map(float, cyl_range[:3])), list(map(float,
+                                                           cyl_range[3:]))
+        if any(h <= m for m, h in zip(lo, hi)) or lo[0] < 0:
+            raise ValueError('CylinderGrid: cyl_range needs 0 <= r_min and '
+                             f'min < max on every axis, got {cyl_range}')
+        if hi[1] - lo[1] > 2 * math.pi + 1e-6:
+            raise ValueError('CylinderGrid: the azimuth range exceeds 2*pi: '
+                             f'{cyl_range}')
+        self.grid_shape = tuple(int(s) for s in grid_shape)
+        self.cyl_range = tuple(lo + hi)
+        self.full_circle = abs(hi[1] - lo[1] - 2 * math.pi) < 1e-4
+
+    @property
+    def num_voxels(self) -> int:
+        """``R * Theta * Z``."""
+        r, t, z = self.grid_shape
+        return r * t * z
+
+    @property
+    def voxel_size(self) -> Tuple[float, float, float]:
+        """``(dr, dtheta, dz)``."""
+        return tuple((self.cyl_range[i + 3] - self.cyl_range[i]) /
+                     self.grid_shape[i] for i in range(3))
+
+    def voxel_coords(self, cyl: Tensor) -> Tuple[Tensor, Tensor]:
+        """Integer voxel coordinates of cylindrical points.
+
+        Args:
+            cyl (Tensor): ``(r, theta, z)``. Shape (..., 3).
+
+        Returns:
+            tuple[Tensor, Tensor]: ``(i, j, k)`` as int64, shape (..., 3)
+            (meaningless where outside), and the inside mask, shape (...).
+        """
+        lo = cyl.new_tensor(self.cyl_range[:3])
+        size = cyl.new_tensor(self.voxel_size)
+        coords = torch.floor((cyl - lo) / size).long()
+        shape = torch.tensor(self.grid_shape, device=cyl.device)
+        if self.full_circle:
+            coords[..., 1] = coords[..., 1] % self.grid_shape[1]
+        inside = ((coords >= 0) & (coords < shape)).all(dim=-1)
+        return coords, inside
+
+    def flat_index(self, cyl: Tensor, batch_idx: Tensor = None) -> Tensor:
+        """Flat voxel index ``((b * R + i) * Theta + j) * Z + k``.
+
+        Args:
+            cyl (Tensor): ``(r, theta, z)``. Shape (..., 3).
+            batch_idx (Tensor, optional): Sample of each point, broadcast to
+                shape (...). Defaults to sample 0.
+
+        Returns:
+            Tensor: int64 index, -1 outside the grid. Shape (...).
+        """
+        coords, inside = self.voxel_coords(cyl)
+        _, nt, nz = self.grid_shape
+        flat = (coords[..., 0] * nt + coords[..., 1]) * nz + coords[..., 2]
+        if batch_idx is not None:
+            flat = flat + batch_idx * self.num_voxels
+        return torch.where(inside, flat, torch.full_like(flat, -1))
+
+    def normalize(self, cyl: Tensor) -> Tensor:
+        """Map the ranges to ``[-1, 1]`` (``grid_sample``, corners excluded).
+
+        Args:
+            cyl (Tensor): ``(r, theta, z)``. Shape (..., 3).
+
+        Returns:
+            Tensor: Normalised coordinates. Shape (..., 3).
+        """
+        lo = cyl.new_tensor(self.cyl_range[:3])
+        hi = cyl.new_tensor(self.cyl_range[3:])
+        return (cyl - lo) / (hi - lo) * 2 - 1
+
+    def covers_box(self, box: Sequence[float]) -> bool:
+        """Whether every point of an axis-aligned box lies in the cylinder.
+
+        The farthest points of a box are its corners (``50 * sqrt(2)`` m for
+        ``x, y in [-50, 50]``), the nearest the point closest to the axis.
+
+        Args:
+            box (Sequence[float]): ``(x_min, y_min, z_min, x_max, y_max,
+                z_max)``.
+
+        Returns:
+            bool: True when radius and height are covered and the azimuth
+            range is the full circle (a partial sector is reported as not
+            covering, which is conservative).
+        """
+        x0, y0, z0, x1, y1, z1 = map(float, box)
+        r_min, t_min, zc_min, r_max, t_max, zc_max = self.cyl_range
+        far = max(math.hypot(x, y) for x in (x0, x1) for y in (y0, y1))
+        near = math.hypot(
+            0.0 if x0 <= 0 <= x1 else min(abs(x0), abs(x1)),
+            0.0 if y0 <= 0 <= y1 else min(abs(y0), abs(y1)))
+        return (r_min <= near and far <= r_max and zc_min <= z0
+                and z1 <= zc_max and self.full_circle)
+
+    def __repr__(self) -> str:
+        return (f'{type(self).__name__}(grid_shape={self.grid_shape}, '
+                f'cyl_range={self.cyl_range})')

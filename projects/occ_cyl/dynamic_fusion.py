@@ -1,0 +1,64 @@
+"""OccFusion-style 2D dynamic fusion of a camera and a LiDAR plane."""
+from typing import Sequence
+
+import torch
+from mmcv.cnn import ConvModule
+from mmdet3d.registry import MODELS
+from mmdet3d.utils import ConfigType, OptMultiConfig
+from mmengine.model import BaseModule
+from torch import Tensor, nn
+
+
+@MODELS.register_module()
+class DynamicFusion2D(BaseModule):
+    """Fuse same-sized feature planes with a learned channel attention.
+
+    The dynamic fusion of OccFusion (Ming et al., 2024) in 2D, as used by
+    OccCylindrical for each TPV-polar plane: the inputs are concatenated,
+    a 3x3 conv mixes them, and a squeeze-and-excitation gate (global average
+    pooling, 1x1 conv, sigmoid) re-weights the channels per sample, so the
+    network can lean on the LiDAR or the camera plane depending on the
+    scene.
+
+    Args:
+        in_channels (Sequence[int]): Channels of each input plane.
+        out_channels (int): Channels of the fused plane.
+        norm_cfg (dict): Normalisation config. Defaults to BN2d.
+        init_cfg (dict, optional): Initialisation config. Defaults to None.
+    """
+
+    def __init__(self,
+                 in_channels: Sequence[int],
+                 out_channels: int,
+                 norm_cfg: ConfigType = dict(type='BN2d'),
+                 init_cfg: OptMultiConfig = None) -> None:
+        super().__init__(init_cfg=init_cfg)
+        self.in_channels = tuple(int(c) for c in in_channels)
+        self.fuse = ConvModule(
+            sum(self.in_channels),
+            out_channels,
+            3,
+            padding=1,
+            norm_cfg=norm_cfg)
+        self.gate = nn.Sequential(
+            nn.AdaptiveAvgPool2d(1), nn.Conv2d(out_channels, out_channels, 1),
+            nn.Sigmoid())
+
+    def forward(self, *planes: Tensor) -> Tensor:
+        """Fuse the planes.
+
+        Args:
+            *planes (Tensor): One plane per input. Shape (B, C_i, H, W).
+
+        Returns:
+            Tensor: Fused plane. Shape (B, out_channels, H, W).
+        """
+        channels = tuple(p.shape[1] for p in planes)
+        if channels != self.in_channels or \
+                len({tuple(p.shape[2:]) for p in planes}) != 1:
+            raise ValueError(
+                f'DynamicFusion2D expects planes with channels '
+                f'{self.in_channels} and one spatial size, got shapes '
+                f'{[tuple(p.shape) for p in planes]}')
+        fused = self.fuse(torch.cat(planes, dim=1))
+        return fused * self.gate(fused)

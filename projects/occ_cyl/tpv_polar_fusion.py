@@ -1,0 +1,197 @@
+"""TPV-Polar-Fusion: both point clouds to fused TPV-polar planes.
+
+Implements step 5 of OccCylindrical: eqs. 6-7 (cylindrical partition and
+per-voxel max pooling), eqs. 8-13 (spatial group pooling) and the 2D dynamic
+fusion of each camera plane with its LiDAR plane.
+"""
+from typing import List, Sequence, Tuple
+
+import torch
+from mmdet3d.registry import MODELS
+from mmdet3d.utils import ConfigType, OptMultiConfig
+from mmengine.model import BaseModule
+from torch import Tensor, nn
+
+from projects.occ_common.models.layers import cartesian_to_cylindrical
+from .cylindrical import CylinderGrid
+from .dynamic_fusion import DynamicFusion2D
+from .group_pooling import SpatialGroupPooling
+from .lift_pool import lift_max_pool, voxel_max_pool
+
+
+@MODELS.register_module()
+class TPVPolarFusion(BaseModule):
+    """Fuse the pseudo-3D (camera) and LiDAR point clouds into TPV planes.
+
+    The camera cloud is given in factorised form (depth distribution,
+    context and each bin's 3D point) so that the lift and the voxel max
+    pooling run as one fused operation (:func:`lift_max_pool`). Points
+    outside the cylinder belong to no voxel and are dropped; pick
+    ``cyl_range`` to cover the occupancy grid (the head checks it).
+
+    With a single modality (``with_camera`` or ``with_lidar`` False) the
+    planes of that modality are returned without fusion.
+
+    Args:
+        grid_shape (Sequence[int]): Cylinder resolution ``(R, Theta, Z)``.
+        cyl_range (Sequence[float]): ``(r_min, theta_min, z_min, r_max,
+            theta_max, z_max)``.
+        cam_channels (int): Channels of the pseudo points (``V_context``).
+        lidar_channels (int): Channels of the LiDAR point features.
+        plane_channels (int): Channels of every output plane.
+        num_groups (int): ``M`` of the group pooling. Defaults to 8.
+        with_camera (bool): Use the camera cloud. Defaults to True.
+        with_lidar (bool): Use the LiDAR cloud. Defaults to True.
+        fused_lift (bool): Fused lift-pool (True) or the naive reference.
+            Defaults to True.
+        lift_chunk_size (int): Points per chunk of the fused lift.
+            Defaults to 16384.
+        norm_cfg (dict): Normalisation of the MLPs and fusion.
+            Defaults to BN2d.
+        init_cfg (dict, optional): Initialisation config. Defaults to None.
+    """
+
+    def __init__(self,
+                 grid_shape: Sequence[int],
+                 cyl_range: Sequence[float],
+                 cam_channels: int,
+                 lidar_channels: int,
+                 plane_channels: int,
+                 num_groups: int = 8,
+                 with_camera: bool = True,
+                 with_lidar: bool = True,
+                 fused_lift: bool = True,
+                 lift_chunk_size: int = 16384,
+                 norm_cfg: ConfigType = dict(type='BN2d'),
+                 init_cfg: OptMultiConfig = None) -> None:
+        super().__init__(init_cfg=init_cfg)
+        if not (with_camera or with_lidar):
+            raise ValueError('TPVPolarFusion needs at least one modality')
+        self.grid = CylinderGrid(grid_shape, cyl_range)
+        for size in self.grid.grid_shape:
+            if size % num_groups:
+                raise ValueError(
+                    f'TPVPolarFusion: num_groups={num_groups} must divide '
+                    f'every axis of grid_shape {self.grid.grid_shape}')
+        self.with_camera = with_camera
+        self.with_lidar = with_lidar
+        self.fused_lift = fused_lift
+        self.lift_chunk_size = lift_chunk_size
+        self.plane_channels = plane_channels
+        if with_camera:
+            self.cam_pool = SpatialGroupPooling(cam_channels, plane_channels,
+                                                num_groups, norm_cfg)
+        if with_lidar:
+            self.lidar_pool = SpatialGroupPooling(lidar_channels,
+                                                  plane_channels, num_groups,
+                                                  norm_cfg)
+        if with_camera and with_lidar:
+            self.fusions = nn.ModuleList([
+                DynamicFusion2D((plane_channels, plane_channels),
+                                plane_channels, norm_cfg) for _ in range(3)
+            ])
+
+    def _to_volume(self, pooled: Tensor, batch_size: int) -> Tensor:
+        """(B * V, C) -> Shape (B, C, R, Theta, Z)."""
+        channels = pooled.shape[1]
+        vol = pooled.reshape(batch_size, *self.grid.grid_shape, channels)
+        return vol.permute(0, 4, 1, 2, 3).contiguous()
+
+    def camera_volume(self, depth: Tensor, context: Tensor,
+                      cam_points: Tensor) -> Tensor:
+        """Lift the pseudo points and max-pool them per voxel (eqs. 6-7).
+
+        Args:
+            depth (Tensor): ``V_depth``. Shape (B*N, D, h, w).
+            context (Tensor): ``V_context``. Shape (B*N, C, h, w).
+            cam_points (Tensor): LiDAR-frame point of every bin.
+                Shape (B, N, D, h, w, 3).
+
+        Returns:
+            Tensor: Shape (B, C, R, Theta, Z).
+        """
+        batch_size, num_cams = cam_points.shape[:2]
+        if depth.shape[0] != batch_size * num_cams or \
+                tuple(depth.shape[1:]) != tuple(cam_points.shape[2:5]):
+            raise ValueError(f'TPVPolarFusion: depth {tuple(depth.shape)} '
+                             'does not match cam_points '
+                             f'{tuple(cam_points.shape)}')
+        batch_idx = torch.arange(
+            batch_size, device=depth.device).view(-1, 1, 1, 1, 1)
+        voxel_idx = self.grid.flat_index(
+            cartesian_to_cylindrical(cam_points), batch_idx)
+        pooled = lift_max_pool(
+            depth,
+            context,
+            voxel_idx.flatten(0, 1),
+            batch_size * self.grid.num_voxels,
+            fused=self.fused_lift,
+            chunk_size=self.lift_chunk_size)
+        return self._to_volume(pooled, batch_size)
+
+    def lidar_volume(self, feats: List[Tensor],
+                     xyz: List[Tensor]) -> Tensor:
+        """Max-pool the LiDAR point features per voxel (eqs. 6-7).
+
+        Args:
+            feats (list[Tensor]): Per sample. Shape (P_i, C).
+            xyz (list[Tensor]): Per sample, LiDAR-frame points.
+                Shape (P_i, 3).
+
+        Returns:
+            Tensor: Shape (B, C, R, Theta, Z).
+        """
+        if len(feats) != len(xyz):
+            raise ValueError(f'TPVPolarFusion: {len(feats)} feature sets '
+                             f'for {len(xyz)} point clouds')
+        index = [
+            self.grid.flat_index(cartesian_to_cylindrical(p[:, :3]), i)
+            for i, p in enumerate(xyz)
+        ]
+        pooled = voxel_max_pool(
+            torch.cat(feats, dim=0), torch.cat(index, dim=0),
+            len(feats) * self.grid.num_voxels)
+        return self._to_volume(pooled, len(feats))
+
+    def forward(self,
+                depth: Tensor = None,
+                context: Tensor = None,
+                cam_points: Tensor = None,
+                lidar_feats: List[Tensor] = None,
+                lidar_xyz: List[Tensor] = None) -> Tuple[Tensor, ...]:
+        """Build the fused planes.
+
+        Args:
+            depth (Tensor, optional): ``V_depth``. Shape (B*N, D, h, w).
+            context (Tensor, optional): ``V_context``.
+                Shape (B*N, C, h, w).
+            cam_points (Tensor, optional): Bins' LiDAR-frame points.
+                Shape (B, N, D, h, w, 3).
+            lidar_feats (list[Tensor], optional): Per sample.
+                Shape (P_i, C_lidar).
+            lidar_xyz (list[Tensor], optional): Per sample.
+                Shape (P_i, 3).
+
+        Returns:
+            tuple[Tensor]: Planes (R, Theta), (Theta, Z), (R, Z):
+            Shape (B, C, R, Theta), (B, C, Theta, Z), (B, C, R, Z).
+        """
+        planes = []
+        if self.with_camera:
+            if depth is None or context is None or cam_points is None:
+                raise ValueError('TPVPolarFusion: with_camera needs depth, '
+                                 'context and cam_points')
+            planes.append(
+                self.cam_pool(self.camera_volume(depth, context,
+                                                 cam_points)))
+        if self.with_lidar:
+            if lidar_feats is None or lidar_xyz is None:
+                raise ValueError('TPVPolarFusion: with_lidar needs '
+                                 'lidar_feats and lidar_xyz')
+            planes.append(
+                self.lidar_pool(self.lidar_volume(lidar_feats, lidar_xyz)))
+        if len(planes) == 1:
+            return planes[0]
+        return tuple(
+            fusion(cam, lidar)
+            for fusion, cam, lidar in zip(self.fusions, *planes))

@@ -1,0 +1,109 @@
+"""Tests of the cylinder grid spec."""
+import math
+
+import pytest
+import torch
+
+from projects.occ_cyl.cylindrical import (CylinderGrid,
+                                          cartesian_to_cylindrical,
+                                          cylindrical_to_cartesian)
+
+PI = math.pi
+
+
+def _grid():
+    # dr = 1 m, dtheta = pi / 2, dz = 1 m.
+    return CylinderGrid((4, 4, 2), (0.0, -PI, -1.0, 4.0, PI, 1.0))
+
+
+def test_voxel_index_hand_computed():
+    """(r, theta, z) = (2.5, 0.1, 0.5): i = floor(2.5 / 1) = 2,
+    j = floor((0.1 + pi) / (pi / 2)) = 2, k = floor((0.5 + 1) / 1) = 1 ->
+    flat ((2 * 4) + 2) * 2 + 1 = 21; in sample 1 add 4 * 4 * 2 = 32 -> 53.
+    (0.5, -3, -0.5): i = 0, j = floor(0.14 / 1.57) = 0, k = 0 -> 0."""
+    grid = _grid()
+    cyl = torch.tensor([[2.5, 0.1, 0.5], [0.5, -3.0, -0.5]])
+    coords, inside = grid.voxel_coords(cyl)
+    assert coords.tolist() == [[2, 2, 1], [0, 0, 0]]
+    assert inside.tolist() == [True, True]
+    assert grid.flat_index(cyl).tolist() == [21, 0]
+    assert grid.flat_index(cyl, torch.tensor([1, 0])).tolist() == [53, 0]
+    assert grid.num_voxels == 32
+    assert grid.voxel_size == pytest.approx((1.0, PI / 2, 1.0))
+
+
+def test_azimuth_wraps_and_outside_is_minus_one():
+    """theta = pi is the same direction as -pi: voxel j = 0, not j = 4.
+    (1.5, pi, 0) -> (1, 0, 1) -> flat (1 * 4 + 0) * 2 + 1 = 9.
+    r = 4 (= r_max), z = 1 (= z_max) and z = -1.5 are outside -> -1."""
+    grid = _grid()
+    cyl = torch.tensor([[1.5, PI, 0.0], [4.0, 0.0, 0.0], [1.0, 0.0, 1.0],
+                        [1.0, 0.0, -1.5]],
+                       dtype=torch.float64)
+    coords, inside = grid.voxel_coords(cyl)
+    assert coords[0].tolist() == [1, 0, 1]
+    assert inside.tolist() == [True, False, False, False]
+    assert grid.flat_index(cyl).tolist() == [9, -1, -1, -1]
+
+
+def test_partial_sector_does_not_wrap():
+    """With theta in [0, pi/2) an angle of pi/2 is outside (no wrap)."""
+    grid = CylinderGrid((2, 2, 1), (0.0, 0.0, 0.0, 2.0, PI / 2, 1.0))
+    assert not grid.full_circle
+    cyl = torch.tensor([[1.0, PI / 2, 0.5], [1.0, PI / 4 + 0.01, 0.5]])
+    assert grid.flat_index(cyl).tolist() == [-1, 3]
+    assert not grid.covers_box((-1, -1, 0, 1, 1, 1))
+
+
+def test_covers_the_output_grid_corners():
+    """x, y in [-50, 50]: the corners are 50 * sqrt(2) = 70.71 m away, so a
+    70.72 m cylinder covers the grid and a 70.70 m one does not; every voxel
+    corner of a 200x200x16 grid then maps inside."""
+    box = (-50.0, -50.0, -5.0, 50.0, 50.0, 3.0)
+    good = CylinderGrid((128, 256, 16), (0, -PI, -5, 70.72, PI, 3))
+    bad = CylinderGrid((128, 256, 16), (0, -PI, -5, 70.70, PI, 3))
+    low = CylinderGrid((128, 256, 16), (0, -PI, -4, 70.72, PI, 3))
+    assert good.covers_box(box)
+    assert not bad.covers_box(box)
+    assert not low.covers_box(box)
+    xs = torch.linspace(-50, 50, 201)
+    zs = torch.linspace(-5, 3 - 1e-4, 17)
+    x, y, z = torch.meshgrid(xs, xs, zs, indexing='ij')
+    pts = torch.stack([x, y, z], -1).reshape(-1, 3).double()
+    _, inside = good.voxel_coords(cartesian_to_cylindrical(pts))
+    assert bool(inside.all())
+
+
+def test_normalize_and_round_trip():
+    """normalize maps the range ends to -1 and 1: r = 2 of [0, 4] -> 0; and a
+    voxel centre survives cyl -> cart -> cyl into the same voxel."""
+    grid = _grid()
+    norm = grid.normalize(torch.tensor([[2.0, -PI, 1.0]]))
+    torch.testing.assert_close(norm, torch.tensor([[0.0, -1.0, 1.0]]))
+    centres = torch.tensor([[0.5, -PI + PI / 4, -0.5],
+                            [3.5, PI - PI / 4, 0.5]])
+    back = cartesian_to_cylindrical(cylindrical_to_cartesian(centres))
+    assert grid.flat_index(back).tolist() == grid.flat_index(
+        centres).tolist()
+
+
+def test_empty_points_and_gradient_through_normalize():
+    """No points -> empty indices; normalize is differentiable with slope
+    2 / (r_max - r_min) = 0.5 for r."""
+    grid = _grid()
+    assert grid.flat_index(torch.zeros(0, 3)).shape == (0, )
+    cyl = torch.tensor([[1.0, 0.0, 0.0]], requires_grad=True)
+    grid.normalize(cyl)[0, 0].backward()
+    torch.testing.assert_close(cyl.grad, torch.tensor([[0.5, 0.0, 0.0]]))
+
+
+def test_bad_specs_raise():
+    """Bad shapes, ranges and an azimuth over 2 pi are refused."""
+    with pytest.raises(ValueError, match='grid_shape'):
+        CylinderGrid((4, 4), (0, -PI, -1, 4, PI, 1))
+    with pytest.raises(ValueError, match='cyl_range'):
+        CylinderGrid((4, 4, 2), (0, -PI, -1, 4, PI))
+    with pytest.raises(ValueError, match='min < max'):
+        CylinderGrid((4, 4, 2), (5, -PI, -1, 4, PI, 1))
+    with pytest.raises(ValueError, match='2\\*pi'):
+        CylinderGrid((4, 4, 2), (0, -PI, -1, 4, PI + 1, 1))

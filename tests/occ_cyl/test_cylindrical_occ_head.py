@@ -1,0 +1,103 @@
+"""Tests of the cylindrical-to-Cartesian occupancy head (eqs. 17-18)."""
+import math
+
+import pytest
+import torch
+
+from projects.occ_cyl import CylindricalOccHead
+from projects.occ_cyl.cylindrical_occ_head import sample_plane, voxel_centres
+
+PI = math.pi
+PC_RANGE = (-4.0, -4.0, -1.0, 4.0, 4.0, 1.0)
+CYL = dict(grid_shape=(4, 8, 2),
+           cyl_range=(0.0, -PI, -1.0, 4 * math.sqrt(2) + 0.01, PI, 1.0))
+LOSS = dict(
+    type='MultiScaleOccupancyLoss',
+    num_scales=2,
+    losses=[dict(type='OccFocalLoss'), dict(type='OccLovaszLoss')])
+
+
+def _head(**kwargs):
+    torch.manual_seed(0)
+    cfg = dict(CYL, in_channels=3, pc_range=PC_RANGE,
+               scale_shapes=[(4, 4, 2), (2, 2, 1)], hidden_channels=5,
+               num_classes=4, loss_occ=LOSS)
+    cfg.update(kwargs)
+    return CylindricalOccHead(**cfg)
+
+
+def test_sample_plane_wraps_the_azimuth():
+    """Row values (10, 1, 2, 3) along a periodic width of 4 cells: at w = 1
+    (theta = pi) the sample sits half-way between cell 3 and cell 0 ->
+    (3 + 10) / 2 = 6.5, likewise at w = -1; at w = 0 (pixel 1.5) it is
+    (1 + 2) / 2 = 1.5. Without wrapping the edge value repeats: 3 and 10."""
+    plane = torch.tensor([10.0, 1.0, 2.0, 3.0]).view(1, 1, 1, 4)
+    coords = torch.tensor([[0.0, 1.0], [0.0, -1.0], [0.0, 0.0]])
+    wrapped = sample_plane(plane, coords, False, True)
+    torch.testing.assert_close(wrapped, torch.tensor([[[6.5, 6.5, 1.5]]]))
+    flat = sample_plane(plane, coords, False, False)
+    torch.testing.assert_close(flat, torch.tensor([[[3.0, 10.0, 1.5]]]))
+    # The same along a periodic height.
+    column = plane.view(1, 1, 4, 1)
+    wrapped_h = sample_plane(column, coords[:, [1, 0]], True, False)
+    torch.testing.assert_close(wrapped_h, wrapped)
+
+
+def test_voxel_centres():
+    """x in [0, 2] with 2 cells -> centres 0.5 and 1.5; y, z one cell -> 1."""
+    centres = voxel_centres((0, 0, 0, 2, 2, 2), (2, 1, 1))
+    assert centres.tolist() == [[0.5, 1.0, 1.0], [1.5, 1.0, 1.0]]
+
+
+def test_constant_planes_give_classifier_of_three_times_the_value():
+    """Planes constant c = (1, -2, 0.5) per channel: every voxel samples
+    c + c + c (eq. 17 sums the three planes), so every logit equals the
+    classifier applied to 3 c, at both scales."""
+    head = _head().eval()
+    c = torch.tensor([1.0, -2.0, 0.5])
+    sizes = [[(4, 8), (8, 2), (4, 2)], [(2, 4), (4, 1), (2, 1)]]
+    planes = [
+        tuple(c.view(1, 3, 1, 1).expand(2, 3, *s).contiguous() for s in lvl)
+        for lvl in sizes
+    ]
+    logits = head(planes)
+    assert [tuple(x.shape) for x in logits] == [(2, 4, 4, 4, 2),
+                                                (2, 4, 2, 2, 1)]
+    for level, x in enumerate(logits):
+        expected = head.classifiers[level](3 * c)
+        torch.testing.assert_close(
+            x.permute(0, 2, 3, 4, 1).reshape(-1, 4),
+            expected.expand(x.numel() // 4, 4))
+    assert head.predict(logits).shape == (2, 4, 4, 2)
+    assert torch.equal(head.predict(logits), logits[0].argmax(1))
+
+
+def test_loss_and_backward_with_an_all_ignored_sample():
+    """The multi-scale loss gives one term per loss and scale; a sample
+    whose labels are all 255 contributes nothing but does not fail, and
+    gradients reach the planes."""
+    head = _head()
+    gen = torch.Generator().manual_seed(0)
+    sizes = [[(4, 8), (8, 2), (4, 2)], [(2, 4), (4, 1), (2, 1)]]
+    planes = [
+        tuple(torch.randn(2, 3, *s, generator=gen).requires_grad_()
+              for s in lvl) for lvl in sizes
+    ]
+    gt = torch.randint(0, 4, (2, 4, 4, 2), generator=gen)
+    gt[1] = 255
+    losses = head.loss(head(planes), gt)
+    assert sorted(losses) == [
+        'loss_focal_s0', 'loss_focal_s1', 'loss_lovasz_s0', 'loss_lovasz_s1'
+    ]
+    sum(losses.values()).backward()
+    assert all(p.grad is not None for lvl in planes for p in lvl)
+    with pytest.raises(ValueError, match='finest grid'):
+        head.loss(head(planes), gt[:, :2])
+
+
+def test_cylinder_must_cover_the_grid():
+    """A cylinder of radius 5 < 4 sqrt(2) = 5.66 misses the grid corners."""
+    with pytest.raises(ValueError, match='does not cover'):
+        _head(cyl_range=(0.0, -PI, -1.0, 5.0, PI, 1.0))
+    with pytest.raises(ValueError, match='2 output scales'):
+        _head()([()])
