@@ -1,0 +1,188 @@
+"""Channel-to-height occupancy head (FlashOcc) with its losses.
+
+SDG-OCC predicts occupancy from a BEV map with FlashOcc's channel-to-height
+head (Yu et al., "FlashOcc", 2023, Sec. 3.3): 2D convolutions produce
+``num_classes * Dz`` channels per BEV cell which are reshaped into a
+height axis, so no 3D convolution is needed.
+
+Channel order (FlashOcc's ``BEVOCCHead2D``, whose predictor output is viewed
+as ``(..., Dz, num_classes)``): channel ``c = z * num_classes + cls``, i.e.
+the class index varies fastest.
+"""
+from typing import Dict, List, Optional, Sequence
+
+import torch
+from mmdet3d.registry import MODELS
+from mmengine.model import BaseModule
+from torch import Tensor, nn
+
+
+def channels_to_height(x: Tensor, num_classes: int, dz: int) -> Tensor:
+    """Split the channel axis into height and class (FlashOcc order).
+
+    Args:
+        x (Tensor): Channel ``z * num_classes + cls`` holds class ``cls`` at
+            height ``z``. Shape (B, Dz * num_classes, Y, X).
+        num_classes (int): Number of classes.
+        dz (int): Number Dz of height cells.
+
+    Returns:
+        Tensor: Shape (B, num_classes, Dz, Y, X).
+    """
+    if x.dim() != 4 or x.shape[1] != num_classes * dz:
+        raise ValueError(f'channels_to_height expects (B, {dz} * '
+                         f'{num_classes}, Y, X), got {tuple(x.shape)}')
+    batch, _, num_y, num_x = x.shape
+    return x.view(batch, dz, num_classes, num_y,
+                  num_x).transpose(1, 2).contiguous()
+
+
+def height_logits_to_xyz(logits: Tensor) -> Tensor:
+    """Reorder head logits to the (X, Y, Z) layout of the occupancy GT.
+
+    Args:
+        logits (Tensor): Shape (B, num_classes, Dz, Y, X).
+
+    Returns:
+        Tensor: Shape (B, num_classes, X, Y, Z).
+    """
+    if logits.dim() != 5:
+        raise ValueError('height_logits_to_xyz expects (B, num_classes, Dz, '
+                         f'Y, X), got {tuple(logits.shape)}')
+    return logits.permute(0, 1, 4, 3, 2)
+
+
+@MODELS.register_module()
+class ChannelToHeightHead(BaseModule):
+    """FlashOcc channel-to-height head with occupancy losses.
+
+    3x3 conv-BN-ReLU layers, then FlashOcc's per-cell predictor (two 1x1
+    convs with a Softplus in between) to ``num_classes * Dz`` channels,
+    reshaped by :func:`channels_to_height`.
+
+    Args:
+        in_channels (int): Channels of the input BEV.
+        num_classes (int): Occupancy classes (18 for Occ3D).
+        dz (int): Height cells (16 for Occ3D at 0.4 m).
+        mid_channels (int): Width of the conv layers. Defaults to 256.
+        num_convs (int): Number of 3x3 conv layers. Defaults to 1.
+        losses (list[dict]): Occupancy loss configs, each registered in
+            MODELS with ``forward(logits (B, C, X, Y, Z), target (B, X, Y,
+            Z))`` and a ``loss_name`` property (e.g. ``OccFocalLoss``,
+            ``OccLovaszLoss``, ``SceneClassAffinityLoss``).
+            Defaults to a plain cross-entropy ``OccFocalLoss(gamma=0)``.
+        use_camera_mask (bool): Supervise only voxels of the camera mask
+            (Occ3D's camera-visible voxels, as FlashOcc's ``use_mask``).
+            Defaults to True.
+        ignore_index (int): Label without supervision. Defaults to 255.
+        init_cfg (dict, optional): mmengine initialisation config.
+    """
+
+    def __init__(self,
+                 in_channels: int,
+                 num_classes: int,
+                 dz: int,
+                 mid_channels: int = 256,
+                 num_convs: int = 1,
+                 losses: Optional[Sequence[dict]] = None,
+                 use_camera_mask: bool = True,
+                 ignore_index: int = 255,
+                 init_cfg: Optional[dict] = None):
+        super().__init__(init_cfg=init_cfg)
+        if num_classes < 1 or dz < 1 or num_convs < 0:
+            raise ValueError('ChannelToHeightHead needs num_classes >= 1, '
+                             f'dz >= 1 and num_convs >= 0, got {num_classes}'
+                             f', {dz}, {num_convs}')
+        self.num_classes = num_classes
+        self.dz = dz
+        self.use_camera_mask = use_camera_mask
+        self.ignore_index = ignore_index
+        layers: List[nn.Module] = []
+        channels = in_channels
+        for _ in range(num_convs):
+            layers += [
+                nn.Conv2d(channels, mid_channels, 3, padding=1, bias=False),
+                nn.BatchNorm2d(mid_channels),
+                nn.ReLU(inplace=True)
+            ]
+            channels = mid_channels
+        self.convs = nn.Sequential(*layers)
+        # FlashOcc's predictor: Linear(C, 2C) - Softplus - Linear(2C, Dz*K),
+        # written as 1x1 convs so that no permute is needed.
+        self.predictor = nn.Sequential(
+            nn.Conv2d(channels, channels * 2, 1), nn.Softplus(),
+            nn.Conv2d(channels * 2, num_classes * dz, 1))
+        if losses is None:
+            losses = [dict(type='OccFocalLoss', gamma=0.0)]
+        self.losses = nn.ModuleList([MODELS.build(cfg) for cfg in losses])
+        names = [self._loss_key(loss) for loss in self.losses]
+        if len(set(names)) != len(names):
+            raise ValueError('ChannelToHeightHead losses must have distinct '
+                             f'loss_name properties, got {names}')
+
+    @staticmethod
+    def _loss_key(loss: nn.Module) -> str:
+        name = getattr(loss, 'loss_name', None)
+        return name if name else f'loss_{type(loss).__name__.lower()}'
+
+    def forward(self, x: Tensor) -> Tensor:
+        """Occupancy logits of a BEV map.
+
+        Args:
+            x (Tensor): BEV features. Shape (B, C, Y, X).
+
+        Returns:
+            Tensor: Logits. Shape (B, num_classes, Dz, Y, X).
+        """
+        return channels_to_height(
+            self.predictor(self.convs(x)), self.num_classes, self.dz)
+
+    def loss(self,
+             x: Tensor,
+             gt_occ: Tensor,
+             mask_camera: Optional[Tensor] = None,
+             prefix: str = '') -> Dict[str, Tensor]:
+        """Occupancy losses of a BEV map.
+
+        Args:
+            x (Tensor): BEV features. Shape (B, C, Y, X).
+            gt_occ (Tensor): Labels, ``ignore_index`` where unsupervised.
+                Shape (B, X, Y, Z).
+            mask_camera (Tensor, optional): Camera-visible voxels, bool;
+                required when ``use_camera_mask``. Shape (B, X, Y, Z).
+            prefix (str): Appended to every key (e.g. ``'_teacher'``).
+
+        Returns:
+            dict[str, Tensor]: ``{loss_name + prefix: loss}``.
+        """
+        logits = height_logits_to_xyz(self(x))
+        expected = (logits.shape[0], ) + tuple(logits.shape[2:])
+        if tuple(gt_occ.shape) != expected:
+            raise ValueError(f'ChannelToHeightHead: gt_occ must have shape '
+                             f'(B, X, Y, Z) = {expected} to match the head, '
+                             f'got {tuple(gt_occ.shape)}')
+        target = gt_occ.long()
+        if self.use_camera_mask:
+            if mask_camera is None or mask_camera.shape != gt_occ.shape:
+                got = None if mask_camera is None else tuple(
+                    mask_camera.shape)
+                raise ValueError(
+                    'ChannelToHeightHead(use_camera_mask=True) needs '
+                    f'mask_camera of shape {tuple(gt_occ.shape)}, got {got}')
+            target = torch.where(mask_camera.bool(), target,
+                                 torch.full_like(target, self.ignore_index))
+        return {
+            self._loss_key(loss) + prefix: loss(logits, target)
+            for loss in self.losses
+        }
+
+    def predict(self, x: Tensor) -> Tensor:
+        """Most likely class of every voxel.
+
+        Args:
+            x (Tensor): BEV features. Shape (B, C, Y, X).
+
+        Returns:
+            Tensor: Labels, long. Shape (B, X, Y, Z).
+        """
+        return height_logits_to_xyz(self(x)).argmax(dim=1)

@@ -1,0 +1,321 @@
+"""SDG-OCC detector: SDG-Fusion and SDG-KL.
+
+Implements the full model of SDG-OCC (Duan et al., CVPR 2025, Fig. 2):
+image backbone and FPN, the multi-task DepthNet (context, depth, 2D
+semantics), the SDG view transformation into a camera BEV, an SPVCNN LiDAR
+BEV, neighbourhood-attention fusion, the BEV encoder and the
+channel-to-height occupancy head.
+
+* ``variant='fusion'`` (SDG-Fusion): the LiDAR-dominant fusion of the
+  camera and LiDAR BEVs goes to the head, in training and inference.
+* ``variant='kl'`` (SDG-KL): in training the fusion is a teacher, supervised
+  by the occupancy loss, and FOAD distils it into the camera BEV, which is
+  also supervised; at inference the LiDAR encoder and the fusion are
+  skipped and the camera BEV (still guided by the LiDAR depth maps) goes to
+  the head.
+"""
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+import torch
+from mmdet3d.models.detectors import Base3DDetector
+from mmdet3d.registry import MODELS
+from torch import Tensor
+
+from projects.occ_common.models.layers.camera_geometry import \
+    camera_parameter_vector
+from .c2h_head import height_logits_to_xyz
+from .seg_targets import downsample_seg_labels
+
+_VARIANTS = ('fusion', 'kl')
+
+
+def _stack_meta(data_samples: Sequence, key: str, device) -> Tensor:
+    """Stack a per-sample metainfo array into a float tensor."""
+    values = []
+    for index, sample in enumerate(data_samples):
+        if key not in sample.metainfo:
+            raise ValueError(f'SDGOcc: data sample {index} has no metainfo '
+                             f'{key!r} (needed to lift the images)')
+        values.append(torch.as_tensor(np.asarray(sample.metainfo[key])))
+    return torch.stack(values).to(device=device, dtype=torch.float32)
+
+
+def _stack_field(data_samples: Sequence, key: str, device) -> Tensor:
+    """Stack a per-sample ground-truth field into a tensor."""
+    values = []
+    for index, sample in enumerate(data_samples):
+        if not hasattr(sample, key):
+            raise ValueError(f'SDGOcc: data sample {index} has no {key!r} '
+                             '(the training pipeline must pack it)')
+        values.append(torch.as_tensor(getattr(sample, key)))
+    return torch.stack(values).to(device)
+
+
+@MODELS.register_module()
+class SDGOcc(Base3DDetector):
+    """SDG-OCC multi-modal occupancy network.
+
+    Args:
+        img_backbone (dict): Image backbone (e.g. ``mmdet.ResNet``).
+        img_neck (dict): Image neck to stride ``downsample`` (``mmdet.FPN``);
+            its first output is used.
+        depth_net (dict): ``DepthNet`` with ``seg_channels > 0``.
+        view_transform (dict): ``SDGViewTransform``.
+        bev_encoder (dict): ``SDGBEVEncoder``.
+        occ_head (dict): ``ChannelToHeightHead``.
+        lidar_encoder (dict): ``SPVCNNEncoder``; its BEV must match the
+            camera BEV grid.
+        fusion (dict): ``NeighborhoodFusion`` with the LiDAR BEV as source
+            and the camera BEV as cross, output channels = camera BEV
+            channels.
+        variant (str): ``'fusion'`` or ``'kl'``. Defaults to 'fusion'.
+        distill_loss (dict, optional): ``FOADDistillLoss``; required for
+            ``'kl'``.
+        depth_loss (dict, optional): ``DepthBCELoss``. Defaults to None.
+        seg_loss (dict, optional): 2D semantic loss on (N, C) logits, e.g.
+            ``mmdet.CrossEntropyLoss`` with ``ignore_index=255``.
+            Defaults to None.
+        teacher_loss_weight (float): Factor of the teacher's occupancy
+            losses in ``'kl'`` training. Defaults to 1.0.
+        seg_empty_label (int, optional): 2D semantic target of feature
+            cells that no labelled LiDAR return hits. The lidarseg labels
+            are 1..16, so class 0 is free to mean "background" (sky, beyond
+            the LiDAR's reach): predicting it there keeps the semantic
+            diffusion from spreading depth into those cells. None ignores
+            them instead. Defaults to 0.
+        downsample (int): Image-to-feature stride. Defaults to 16.
+        data_preprocessor (dict, optional): Data preprocessor config.
+        init_cfg (dict, optional): mmengine initialisation config.
+    """
+
+    def __init__(self,
+                 img_backbone: dict,
+                 img_neck: dict,
+                 depth_net: dict,
+                 view_transform: dict,
+                 bev_encoder: dict,
+                 occ_head: dict,
+                 lidar_encoder: dict,
+                 fusion: dict,
+                 variant: str = 'fusion',
+                 distill_loss: Optional[dict] = None,
+                 depth_loss: Optional[dict] = None,
+                 seg_loss: Optional[dict] = None,
+                 teacher_loss_weight: float = 1.0,
+                 seg_empty_label: Optional[int] = 0,
+                 downsample: int = 16,
+                 data_preprocessor: Optional[dict] = None,
+                 init_cfg: Optional[dict] = None):
+        super().__init__(
+            data_preprocessor=data_preprocessor, init_cfg=init_cfg)
+        if variant not in _VARIANTS:
+            raise ValueError(f'SDGOcc variant must be one of {_VARIANTS}, '
+                             f'got {variant!r}')
+        if variant == 'kl' and distill_loss is None:
+            raise ValueError("SDGOcc(variant='kl') needs a distill_loss")
+        self.variant = variant
+        self.downsample = int(downsample)
+        self.teacher_loss_weight = float(teacher_loss_weight)
+        self.seg_empty_label = seg_empty_label
+        self.img_backbone = MODELS.build(img_backbone)
+        self.img_neck = MODELS.build(img_neck)
+        self.depth_net = MODELS.build(depth_net)
+        self.view_transform = MODELS.build(view_transform)
+        self.bev_encoder = MODELS.build(bev_encoder)
+        self.occ_head = MODELS.build(occ_head)
+        self.lidar_encoder = MODELS.build(lidar_encoder)
+        self.fusion = MODELS.build(fusion)
+        self.distill_loss = (None if distill_loss is None else
+                             MODELS.build(distill_loss))
+        self.depth_loss = (None
+                           if depth_loss is None else MODELS.build(depth_loss))
+        self.seg_loss = None if seg_loss is None else MODELS.build(seg_loss)
+
+    # ------------------------------------------------------------------
+    # Features
+    # ------------------------------------------------------------------
+    def extract_img_feat(self, imgs: Tensor) -> Tensor:
+        """Image features at stride ``downsample``.
+
+        Args:
+            imgs (Tensor): Shape (B, N, 3, H, W).
+
+        Returns:
+            Tensor: Shape (B * N, C, H / downsample, W / downsample).
+        """
+        if imgs.dim() != 5:
+            raise ValueError('SDGOcc expects inputs["imgs"] of shape (B, N, '
+                             f'3, H, W), got {tuple(imgs.shape)}')
+        feats = self.img_neck(self.img_backbone(imgs.flatten(0, 1)))
+        if isinstance(feats, (list, tuple)):
+            feats = feats[0]
+        expected = (imgs.shape[-2] // self.downsample,
+                    imgs.shape[-1] // self.downsample)
+        if tuple(feats.shape[-2:]) != expected:
+            raise ValueError(f'SDGOcc: image features {tuple(feats.shape)} '
+                             f'are not at stride {self.downsample} of the '
+                             f'images {tuple(imgs.shape)}')
+        return feats
+
+    def extract_camera_bev(self, inputs: dict, data_samples: Sequence
+                           ) -> Tuple[Dict[str, Tensor], Dict[str, Tensor]]:
+        """DepthNet outputs and the SDG camera BEV.
+
+        Args:
+            inputs (dict): ``imgs`` (B, N, 3, H, W) and ``points`` (list of
+                (P_b, C) tensors).
+            data_samples (Sequence[Det3DDataSample]): Carry ``lidar2img``
+                (N, 4, 4) in their metainfo.
+
+        Returns:
+            tuple[dict, dict]: The DepthNet outputs and the view-transform
+            outputs (``bev``, ``bev_mask``, ...).
+        """
+        imgs = inputs['imgs']
+        feats = self.extract_img_feat(imgs)
+        device = imgs.device
+        cam_params = None
+        if getattr(self.depth_net, 'camera_param_dims', 0) > 0:
+            cam_params = camera_parameter_vector(
+                _stack_meta(data_samples, 'cam2img', device),
+                _stack_meta(data_samples, 'lidar2cam', device),
+                _stack_meta(data_samples, 'img_aug_matrix',
+                            device)).flatten(0, 1)
+        depth_out = self.depth_net(feats, cam_params=cam_params)
+        lidar2img = _stack_meta(data_samples, 'lidar2img', device)
+        if lidar2img.shape[:2] != imgs.shape[:2]:
+            raise ValueError(f'SDGOcc: lidar2img {tuple(lidar2img.shape)} '
+                             f'does not match the images '
+                             f'{tuple(imgs.shape[:2])} (B, N)')
+        cam = self.view_transform(depth_out['context'], depth_out['depth'],
+                                  depth_out.get('seg_logits'),
+                                  self._points(inputs), lidar2img,
+                                  imgs.shape[-2:])
+        return depth_out, cam
+
+    @staticmethod
+    def _points(inputs: dict) -> List[Tensor]:
+        if 'points' not in inputs:
+            raise ValueError('SDGOcc needs inputs["points"]: the SDG view '
+                             'transform is guided by LiDAR depth')
+        return list(inputs['points'])
+
+    def extract_lidar_bev(self, inputs: dict) -> Dict[str, Tensor]:
+        """LiDAR BEV ``bev`` (B, C, Y, X) and ``bev_mask`` (B, 1, Y, X)."""
+        return self.lidar_encoder(self._points(inputs))
+
+    def fuse(self, lidar: Dict[str, Tensor], cam: Dict[str, Tensor]
+             ) -> Tensor:
+        """LiDAR-dominant fusion: LiDAR BEV as source, camera as cross."""
+        if lidar['bev'].shape[-2:] != cam['bev'].shape[-2:]:
+            raise ValueError(f'SDGOcc: LiDAR BEV {tuple(lidar["bev"].shape)}'
+                             f' and camera BEV {tuple(cam["bev"].shape)} '
+                             'are not on the same grid')
+        return self.fusion(lidar['bev'], cam['bev'])
+
+    def extract_feat(self, inputs: dict, data_samples: Sequence) -> Tensor:
+        """The BEV the head sees at inference. Shape (B, C, Y, X)."""
+        _, cam = self.extract_camera_bev(inputs, data_samples)
+        if self.variant == 'kl':
+            # SDG-KL's inference path: no LiDAR encoder, no fusion.
+            return cam['bev']
+        return self.fuse(self.extract_lidar_bev(inputs), cam)
+
+    # ------------------------------------------------------------------
+    # mmengine contract
+    # ------------------------------------------------------------------
+    def _aux_losses(self, depth_out: Dict[str, Tensor],
+                    data_samples: Sequence, device) -> Dict[str, Tensor]:
+        """Depth and 2D semantic losses of the DepthNet."""
+        losses = {}
+        if self.depth_loss is None and self.seg_loss is None:
+            return losses
+        gt_depth = _stack_field(data_samples, 'gt_depth',
+                                device).flatten(0, 1).float()
+        if self.depth_loss is not None:
+            losses['loss_depth'] = self.depth_loss(depth_out['depth'],
+                                                   gt_depth)
+        if self.seg_loss is not None:
+            if 'seg_logits' not in depth_out:
+                raise ValueError('SDGOcc: seg_loss needs a DepthNet with '
+                                 'seg_channels > 0')
+            gt_seg = _stack_field(data_samples, 'gt_seg_2d',
+                                  device).flatten(0, 1)
+            target = downsample_seg_labels(
+                gt_seg, gt_depth, self.downsample,
+                empty_label=self.seg_empty_label)
+            logits = depth_out['seg_logits']
+            losses['loss_seg'] = self.seg_loss(
+                logits.permute(0, 2, 3, 1).reshape(-1, logits.shape[1]),
+                target.reshape(-1))
+        return losses
+
+    def _occ_targets(self, data_samples: Sequence,
+                     device) -> Tuple[Tensor, Optional[Tensor]]:
+        gt_occ = _stack_field(data_samples, 'gt_occ', device).long()
+        mask = None
+        if self.occ_head.use_camera_mask:
+            mask = _stack_field(data_samples, 'mask_camera', device).bool()
+        return gt_occ, mask
+
+    def loss(self, inputs: dict, data_samples: Sequence) -> Dict[str, Tensor]:
+        """Training losses.
+
+        Args:
+            inputs (dict): ``imgs`` (B, N, 3, H, W), ``points``.
+            data_samples (Sequence[Det3DDataSample]): With ``gt_occ`` (X, Y,
+                Z), ``mask_camera`` (X, Y, Z), ``gt_depth`` and
+                ``gt_seg_2d`` (N, H, W), and the camera metainfo.
+
+        Returns:
+            dict[str, Tensor]: Occupancy losses (plus ``*_teacher`` and
+            ``loss_distill`` for SDG-KL), ``loss_depth``, ``loss_seg``.
+        """
+        device = inputs['imgs'].device
+        depth_out, cam = self.extract_camera_bev(inputs, data_samples)
+        gt_occ, mask = self._occ_targets(data_samples, device)
+        losses = self._aux_losses(depth_out, data_samples, device)
+        lidar = self.extract_lidar_bev(inputs)
+        fused = self.fuse(lidar, cam)
+        if self.variant == 'fusion':
+            losses.update(
+                self.occ_head.loss(self.bev_encoder(fused), gt_occ, mask))
+            return losses
+        losses.update(
+            self.occ_head.loss(self.bev_encoder(cam['bev']), gt_occ, mask))
+        teacher = self.occ_head.loss(
+            self.bev_encoder(fused), gt_occ, mask, prefix='_teacher')
+        losses.update({
+            key: value * self.teacher_loss_weight
+            for key, value in teacher.items()
+        })
+        # The teacher's region is where the LiDAR identified something (the
+        # "LiDAR-identified regions" of FOAD), not the whole fused map.
+        losses['loss_distill'] = self.distill_loss(
+            cam['bev'], fused, lidar['bev_mask'], cam['bev_mask'])
+        return losses
+
+    def predict(self, inputs: dict, data_samples: Sequence) -> list:
+        """Occupancy of every sample.
+
+        Args:
+            inputs (dict): ``imgs`` (B, N, 3, H, W), ``points``.
+            data_samples (Sequence[Det3DDataSample]): Camera metainfo.
+
+        Returns:
+            list[Det3DDataSample]: The input samples with ``pred_occ`` (X, Y,
+            Z) long added; their ground truth stays for the metric.
+        """
+        occ = self.occ_head.predict(
+            self.bev_encoder(self.extract_feat(inputs, data_samples)))
+        for sample, pred in zip(data_samples, occ):
+            sample.pred_occ = pred
+        return list(data_samples)
+
+    def _forward(self, inputs: dict, data_samples: Sequence) -> Tensor:
+        """Occupancy logits (B, num_classes, X, Y, Z) of the inference path.
+        """
+        return height_logits_to_xyz(
+            self.occ_head(
+                self.bev_encoder(self.extract_feat(inputs, data_samples))))

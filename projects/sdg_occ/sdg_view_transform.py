@@ -1,0 +1,262 @@
+"""Semantic- and depth-guided (SDG) view transformation.
+
+Implements Sec. 3.2 of SDG-OCC (Duan et al., CVPR 2025), eqs. 1-2 and
+Fig. 4: LiDAR points are projected into every camera as a sparse depth map
+at feature resolution; semantic diffusion (eq. 1) spreads their depth
+inside the predicted semantic regions; every pixel with an extended depth
+spawns a few virtual points around it (bilinear incremental
+discretization, eq. 2) weighted by its predicted depth distribution; the
+remaining pixels fall back to the plain LSS lift over all depth bins. The
+features of all lifted points are pooled into the camera BEV.
+"""
+from typing import Dict, List, Optional, Sequence
+
+import torch
+from mmdet3d.registry import MODELS
+from mmengine.model import BaseModule
+from torch import Tensor
+
+from projects.occ_common.models.layers.camera_geometry import (
+    create_frustum, frustum_to_lidar, project_points)
+from projects.occ_common.models.losses.depth_bce_loss import num_depth_bins
+from .bev_pool import (BEVPoolIndexCache, BEVPoolIndices, bev_pool,
+                       bev_pool_indices, bev_pool_mask)
+from .semantic_diffusion import semantic_depth_diffusion
+from .virtual_points import bilinear_incremental_discretization
+
+_FALLBACKS = ('lss', 'none')
+
+
+def points_to_depth_maps(points: Sequence[Tensor], lidar2img: Tensor,
+                         img_shape: Sequence[int],
+                         feat_shape: Sequence[int]) -> Tensor:
+    """Nearest LiDAR depth of every feature cell of every camera.
+
+    A point projected to pixel (u, v) (pixel i covers [i, i + 1), see
+    :mod:`projects.occ_common.models.layers.camera_geometry`) falls in
+    feature cell ``(floor(v / s_y), floor(u / s_x))`` with the strides
+    ``s = img / feat``; the cell keeps its nearest return, the surface the
+    camera sees.
+
+    Args:
+        points (Sequence[Tensor]): Per sample, (x, y, z, ...) in the working
+            frame. Shape (P_b, C >= 3).
+        lidar2img (Tensor): Working frame to augmented pixels, as
+            ``(u d, v d, d, 1)``. Shape (B, N, 4, 4).
+        img_shape (Sequence[int]): Network input (H, W).
+        feat_shape (Sequence[int]): Feature map (h, w).
+
+    Returns:
+        Tensor: Depth, 0 where no return. Shape (B * N, h, w).
+    """
+    batch, num_cams = lidar2img.shape[:2]
+    if len(points) != batch:
+        raise ValueError(f'points_to_depth_maps got {len(points)} point '
+                         f'clouds for a batch of {batch} camera sets')
+    img_h, img_w = (int(v) for v in img_shape)
+    feat_h, feat_w = (int(v) for v in feat_shape)
+    depth = lidar2img.new_full((batch * num_cams * feat_h * feat_w, ),
+                               float('inf'))
+    for b, pts in enumerate(points):
+        if pts.dim() != 2 or pts.shape[1] < 3:
+            raise ValueError(f'points of sample {b} must be (P, C >= 3), '
+                             f'got {tuple(pts.shape)}')
+        if pts.shape[0] == 0:
+            continue
+        uv, dist = project_points(pts[:, :3].to(lidar2img), lidar2img[b])
+        col = torch.floor(uv[..., 0] * (feat_w / img_w)).long()
+        row = torch.floor(uv[..., 1] * (feat_h / img_h)).long()
+        inside = ((dist > 0) & (col >= 0) & (col < feat_w) & (row >= 0)
+                  & (row < feat_h))
+        cam = torch.arange(num_cams, device=pts.device).view(-1, 1)
+        cell = ((b * num_cams + cam) * feat_h + row) * feat_w + col
+        depth.scatter_reduce_(
+            0, cell[inside], dist[inside], reduce='amin', include_self=True)
+    depth = torch.where(torch.isinf(depth), torch.zeros_like(depth), depth)
+    return depth.view(batch * num_cams, feat_h, feat_w)
+
+
+@MODELS.register_module()
+class SDGViewTransform(BaseModule):
+    """SDG view transformation from image features to the camera BEV.
+
+    Args:
+        point_cloud_range (Sequence[float]): (xmin, ymin, zmin, xmax, ymax,
+            zmax) of the BEV, metres.
+        bev_shape (Sequence[int]): (Y, X) cells of the camera BEV.
+        depth_bound (Sequence[float]): (dmin, dmax, step) of the depth bins.
+        diffusion_radius (float): Radius, in feature-map pixels, of the
+            semantic diffusion. Defaults to 2.0.
+        layer_radius (float): Half width r, metres, of the virtual-point
+            interval (1 m in the paper, Table 4). Defaults to 1.0.
+        num_layers (int): Virtual points per pixel (8 in the paper).
+            Defaults to 8.
+        fallback (str): Lift of pixels without an extended depth: ``'lss'``
+            (all bins, weighted by the depth distribution) or ``'none'``
+            (dropped). Defaults to 'lss'.
+        use_sdg (bool): False lifts every pixel with plain LSS (the
+            baseline of Table 3). Defaults to True.
+        init_cfg (dict, optional): mmengine initialisation config.
+    """
+
+    def __init__(self,
+                 point_cloud_range: Sequence[float],
+                 bev_shape: Sequence[int],
+                 depth_bound: Sequence[float],
+                 diffusion_radius: float = 2.0,
+                 layer_radius: float = 1.0,
+                 num_layers: int = 8,
+                 fallback: str = 'lss',
+                 use_sdg: bool = True,
+                 init_cfg: Optional[dict] = None):
+        super().__init__(init_cfg=init_cfg)
+        if fallback not in _FALLBACKS:
+            raise ValueError(f'SDGViewTransform fallback must be one of '
+                             f'{_FALLBACKS}, got {fallback!r}')
+        if not use_sdg and fallback != 'lss':
+            raise ValueError('SDGViewTransform(use_sdg=False) lifts every '
+                             "pixel with LSS and needs fallback='lss'")
+        self.point_cloud_range = tuple(float(v) for v in point_cloud_range)
+        self.bev_shape = tuple(int(v) for v in bev_shape)
+        self.depth_bound = tuple(float(v) for v in depth_bound)
+        self.num_bins = num_depth_bins(self.depth_bound)
+        self.diffusion_radius = float(diffusion_radius)
+        self.layer_radius = float(layer_radius)
+        self.num_layers = int(num_layers)
+        self.fallback = fallback
+        self.use_sdg = use_sdg
+        self.lss_cache = BEVPoolIndexCache()
+
+    def _lss_indices(self, lidar2img: Tensor, img_shape: Sequence[int],
+                     feat_shape: Sequence[int]) -> BEVPoolIndices:
+        """Indices of the dense LSS frustum, cached per geometry.
+
+        Frustum point (m, k, i, j) has weight index ``((m * D + k) * h + i)
+        * w + j`` (the flat order of the depth distribution) and feature
+        index ``(m * h + i) * w + j``.
+        """
+        batch, num_cams = lidar2img.shape[:2]
+        feat_h, feat_w = (int(v) for v in feat_shape)
+
+        def compute() -> BEVPoolIndices:
+            frustum = create_frustum(img_shape, feat_shape, self.depth_bound)
+            coords = frustum_to_lidar(frustum, lidar2img).reshape(-1, 3)
+            device = lidar2img.device
+            cam = torch.arange(batch * num_cams, device=device)
+            pix = torch.arange(feat_h * feat_w, device=device)
+            feat_index = (cam.view(-1, 1, 1) * (feat_h * feat_w) +
+                          pix.view(1, 1, -1)).expand(-1, self.num_bins,
+                                                     -1).reshape(-1)
+            batch_index = (cam // num_cams).view(-1, 1).expand(
+                -1, self.num_bins * feat_h * feat_w).reshape(-1)
+            return bev_pool_indices(coords, batch_index, feat_index, batch,
+                                    self.point_cloud_range, self.bev_shape)
+
+        key = (lidar2img, tuple(int(v) for v in img_shape), (feat_h, feat_w))
+        return self.lss_cache.get(key, compute)
+
+    def _sdg_indices(self, depths: Tensor, valid: Tensor, lidar2img: Tensor,
+                     img_shape: Sequence[int]) -> BEVPoolIndices:
+        """Indices of the valid virtual points (depths (M, L, h, w))."""
+        num_m, num_l, feat_h, feat_w = depths.shape
+        batch, num_cams = lidar2img.shape[:2]
+        flat = torch.nonzero(valid.reshape(-1), as_tuple=False).squeeze(1)
+        pix = flat % (feat_h * feat_w)
+        cam = flat // (num_l * feat_h * feat_w)
+        row, col = pix // feat_w, pix % feat_w
+        # Same cell centres as the LSS frustum (create_frustum).
+        u = (col.to(depths.dtype) + 0.5) * (img_shape[1] / feat_w)
+        v = (row.to(depths.dtype) + 0.5) * (img_shape[0] / feat_h)
+        d = depths.reshape(-1)[flat]
+        homo = torch.stack([u * d, v * d, d, torch.ones_like(d)], dim=1)
+        img2lidar = torch.linalg.inv(lidar2img.double()).to(depths.dtype)
+        coords = torch.einsum('pij,pj->pi',
+                              img2lidar.reshape(-1, 4, 4)[cam], homo)[:, :3]
+        return bev_pool_indices(
+            coords,
+            cam // num_cams,
+            cam * (feat_h * feat_w) + pix,
+            batch,
+            self.point_cloud_range,
+            self.bev_shape,
+            weight_index=flat)
+
+    def forward(self, context: Tensor, depth_prob: Tensor,
+                seg_logits: Optional[Tensor], points: Sequence[Tensor],
+                lidar2img: Tensor,
+                img_shape: Sequence[int]) -> Dict[str, Tensor]:
+        """Lift image features into the camera BEV.
+
+        Args:
+            context (Tensor): Texture features. Shape (B * N, C, h, w).
+            depth_prob (Tensor): Depth distribution. Shape (B * N, D, h, w).
+            seg_logits (Tensor, optional): Semantic logits; their argmax is
+                the class map of the diffusion (class 0 is background).
+                Required when ``use_sdg``. Shape (B * N, S, h, w).
+            points (Sequence[Tensor]): Per sample LiDAR points in the working
+                frame. Shape (P_b, C >= 3).
+            lidar2img (Tensor): Working frame to augmented pixels.
+                Shape (B, N, 4, 4).
+            img_shape (Sequence[int]): Network input (H, W).
+
+        Returns:
+            dict[str, Tensor]: ``bev`` (B, C, Y, X); ``bev_mask`` (B, 1, Y,
+            X) bool, cells that received a point; ``ext_depth`` (B * N, h,
+            w), the diffused depth; ``num_sdg_points`` and
+            ``num_lss_points``, long scalars, points pooled by each lift.
+        """
+        batch, num_cams = lidar2img.shape[:2]
+        num_m, _, feat_h, feat_w = context.shape
+        if num_m != batch * num_cams or depth_prob.shape != (
+                num_m, self.num_bins, feat_h, feat_w):
+            raise ValueError(
+                'SDGViewTransform expects context (B*N, C, h, w) and '
+                f'depth_prob (B*N, {self.num_bins}, h, w) for B*N = '
+                f'{batch * num_cams}, got {tuple(context.shape)} and '
+                f'{tuple(depth_prob.shape)}')
+        feats = context.permute(0, 2, 3, 1).reshape(-1, context.shape[1])
+        indices: List[BEVPoolIndices] = []
+        weights: List[Tensor] = []
+        zero = torch.zeros((), dtype=torch.long, device=context.device)
+        out = dict(num_sdg_points=zero, num_lss_points=zero)
+
+        has_ext = torch.zeros(
+            num_m, feat_h, feat_w, dtype=torch.bool, device=context.device)
+        if self.use_sdg:
+            if seg_logits is None or seg_logits.shape[0] != num_m \
+                    or seg_logits.shape[2:] != context.shape[2:]:
+                got = None if seg_logits is None else tuple(seg_logits.shape)
+                raise ValueError('SDGViewTransform(use_sdg=True) needs '
+                                 f'seg_logits of shape ({num_m}, S, {feat_h}'
+                                 f', {feat_w}), got {got}')
+            with torch.no_grad():
+                sparse = points_to_depth_maps(points, lidar2img.float(),
+                                              img_shape, (feat_h, feat_w))
+                ext_depth = semantic_depth_diffusion(
+                    sparse, seg_logits.argmax(dim=1), self.diffusion_radius)
+            has_ext = ext_depth > 0
+            out['ext_depth'] = ext_depth
+            depths, vp_weights, valid = bilinear_incremental_discretization(
+                ext_depth.to(depth_prob.dtype), depth_prob, self.depth_bound,
+                self.layer_radius, self.num_layers)
+            sdg = self._sdg_indices(depths, valid, lidar2img, img_shape)
+            indices.append(sdg)
+            weights.append(vp_weights.reshape(-1))
+            out['num_sdg_points'] = zero + sdg.bev_index.numel()
+
+        if self.fallback == 'lss':
+            lss = self._lss_indices(lidar2img, img_shape, (feat_h, feat_w))
+            lss = lss.select(~has_ext.reshape(-1)[lss.feat_index])
+            indices.append(lss)
+            weights.append(depth_prob.reshape(-1))
+            out['num_lss_points'] = zero + lss.bev_index.numel()
+
+        bev = context.new_zeros(batch, context.shape[1], *self.bev_shape)
+        mask = torch.zeros(
+            batch, 1, *self.bev_shape, dtype=torch.bool,
+            device=context.device)
+        for index, weight in zip(indices, weights):
+            bev = bev + bev_pool(feats, weight, index)
+            mask = mask | bev_pool_mask(index)
+        out.update(bev=bev, bev_mask=mask)
+        return out

@@ -1,0 +1,90 @@
+"""Tests of ``ChannelToHeightHead`` and its FlashOcc channel order."""
+import pytest
+import torch
+
+from projects.sdg_occ import (ChannelToHeightHead, channels_to_height,
+                              height_logits_to_xyz)
+
+
+def test_channel_order_is_flashocc():
+    """Channel c = z * num_classes + cls (class fastest), as FlashOcc's
+    ``view(..., Dz, num_classes)``; with 3 classes and Dz = 2, channel 4
+    is (z=1, cls=1) and channel 2 is (z=0, cls=2)."""
+    num_classes, dz = 3, 2
+    x = torch.arange(num_classes * dz, dtype=torch.float32).view(
+        1, -1, 1, 1).expand(1, -1, 2, 3).contiguous()
+    out = channels_to_height(x, num_classes, dz)
+    assert out.shape == (1, 3, 2, 2, 3)
+    for cls in range(num_classes):
+        for z in range(dz):
+            assert torch.all(out[0, cls, z] == z * num_classes + cls)
+    assert torch.all(out[0, 1, 1] == 4) and torch.all(out[0, 2, 0] == 2)
+
+
+def test_xyz_layout():
+    """logits[b, c, z, y, x] moves to [b, c, x, y, z]."""
+    logits = torch.randn(1, 2, 4, 3, 5)
+    xyz = height_logits_to_xyz(logits)
+    assert xyz.shape == (1, 2, 5, 3, 4)
+    assert xyz[0, 1, 4, 2, 3] == logits[0, 1, 3, 2, 4]
+
+
+def _head(**kwargs):
+    torch.manual_seed(0)
+    return ChannelToHeightHead(
+        in_channels=4, num_classes=3, dz=2, mid_channels=8, **kwargs)
+
+
+def test_loss_camera_mask_and_backward():
+    """Masked voxels are ignored: with the whole camera mask off the CE is
+    a connected zero, and with it on the loss is positive and
+    back-propagates into the head."""
+    head = _head()
+    x = torch.randn(2, 4, 3, 5, requires_grad=True)  # Y = 3, X = 5
+    gt = torch.randint(0, 3, (2, 5, 3, 2))
+    off = head.loss(x, gt, torch.zeros(2, 5, 3, 2, dtype=torch.bool))
+    assert list(off) == ['loss_focal'] and off['loss_focal'].item() == 0.0
+    on = head.loss(x, gt, torch.ones(2, 5, 3, 2, dtype=torch.bool),
+                   prefix='_teacher')
+    assert on['loss_focal_teacher'] > 0
+    on['loss_focal_teacher'].backward()
+    assert x.grad.abs().sum() > 0
+
+
+def test_loss_equals_cross_entropy_without_mask():
+    """gamma = 0 focal loss = mean CE over non-ignored voxels (255)."""
+    head = _head(use_camera_mask=False)
+    x = torch.randn(1, 4, 3, 5)
+    gt = torch.randint(0, 3, (1, 5, 3, 2))
+    gt[0, 0] = 255
+    logits = height_logits_to_xyz(head(x))
+    ref = torch.nn.functional.cross_entropy(logits, gt, ignore_index=255)
+    assert torch.isclose(head.loss(x, gt)['loss_focal'], ref, atol=1e-6)
+
+
+def test_extra_losses_and_predict():
+    head = _head(losses=[
+        dict(type='OccFocalLoss', gamma=2.0),
+        dict(type='OccLovaszLoss'),
+        dict(type='SceneClassAffinityLoss', mode='geo', empty_index=2)
+    ])
+    x = torch.randn(1, 4, 3, 5)
+    gt = torch.randint(0, 3, (1, 5, 3, 2))
+    losses = head.loss(x, gt, torch.ones_like(gt, dtype=torch.bool))
+    assert set(losses) == {'loss_focal', 'loss_lovasz', 'loss_geo_scal'}
+    pred = head.predict(x)
+    assert pred.shape == (1, 5, 3, 2) and pred.dtype == torch.long
+    assert torch.equal(pred, height_logits_to_xyz(head(x)).argmax(1))
+
+
+def test_bad_inputs_raise():
+    head = _head()
+    x = torch.randn(1, 4, 3, 5)
+    with pytest.raises(ValueError, match='gt_occ must have shape'):
+        head.loss(x, torch.zeros(1, 3, 5, 2, dtype=torch.long))
+    with pytest.raises(ValueError, match='mask_camera'):
+        head.loss(x, torch.zeros(1, 5, 3, 2, dtype=torch.long))
+    with pytest.raises(ValueError, match='distinct'):
+        _head(losses=[dict(type='OccFocalLoss'), dict(type='OccFocalLoss')])
+    with pytest.raises(ValueError, match='channels_to_height'):
+        channels_to_height(torch.zeros(1, 5, 2, 2), 3, 2)

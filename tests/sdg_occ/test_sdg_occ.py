@@ -1,0 +1,220 @@
+"""Tests of the ``SDGOcc`` detector, SDG-Fusion and SDG-KL, on tiny inputs.
+
+The world is 16 m x 16 m x 4 m at 2 m x 2 m x 1 m (8 x 8 x 4 voxels), two
+64 x 32 cameras at stride 16 (2 x 4 features), 8 depth bins.
+"""
+import pytest
+import torch
+from mmdet3d.registry import MODELS
+
+from projects.occ_common.testing.occ_inputs import make_occ_batch
+from projects.sdg_occ import SDGOcc  # noqa: F401 (registers the model)
+
+PC_RANGE = (-8.0, -8.0, -2.0, 8.0, 8.0, 2.0)
+BEV_SHAPE = (8, 8)
+DEPTH_BOUND = (1.0, 9.0, 1.0)
+NUM_CLASSES = 4
+CAM_CHANNELS = 6
+
+
+def _cfg(variant):
+    return dict(
+        type='SDGOcc',
+        variant=variant,
+        img_backbone=dict(
+            type='mmdet.ResNet',
+            depth=18,
+            base_channels=4,
+            out_indices=(2, 3),
+            norm_cfg=dict(type='BN'),
+            init_cfg=None),
+        img_neck=dict(
+            type='mmdet.FPN', in_channels=[16, 32], out_channels=8,
+            num_outs=2),
+        depth_net=dict(
+            type='DepthNet',
+            in_channels=8,
+            mid_channels=8,
+            context_channels=CAM_CHANNELS,
+            num_depth_bins=8,
+            seg_channels=3,
+            num_res_blocks=1,
+            aspp_dilations=()),
+        view_transform=dict(
+            type='SDGViewTransform',
+            point_cloud_range=PC_RANGE,
+            bev_shape=BEV_SHAPE,
+            depth_bound=DEPTH_BOUND,
+            diffusion_radius=1.0,
+            num_layers=4),
+        lidar_encoder=dict(
+            type='SPVCNNEncoder',
+            in_channels=4,
+            voxel_size=(0.5, 0.5, 0.5),
+            point_cloud_range=PC_RANGE,
+            base_channels=4,
+            stage_channels=(8, 8),
+            stage_strides=(2, 2),
+            bev_shape=BEV_SHAPE,
+            out_channels=8,
+            backend='torch'),
+        fusion=dict(
+            type='NeighborhoodFusion',
+            source_channels=8,
+            cross_channels=CAM_CHANNELS,
+            out_channels=CAM_CHANNELS,
+            embed_dims=8,
+            num_heads=2,
+            kernel_size=3),
+        bev_encoder=dict(
+            type='SDGBEVEncoder',
+            in_channels=CAM_CHANNELS,
+            stage_channels=(8, 16),
+            num_blocks=(1, 1),
+            out_channels=8),
+        occ_head=dict(
+            type='ChannelToHeightHead',
+            in_channels=8,
+            num_classes=NUM_CLASSES,
+            dz=4,
+            mid_channels=8),
+        distill_loss=dict(type='FOADDistillLoss', alpha=1.0, beta=0.5),
+        depth_loss=dict(
+            type='DepthBCELoss', depth_bound=DEPTH_BOUND, downsample=16,
+            loss_weight=0.05),
+        seg_loss=dict(
+            type='mmdet.CrossEntropyLoss',
+            ignore_index=255,
+            avg_non_ignore=True,
+            loss_weight=0.5))
+
+
+def _batch(num_points=(40, 0)):
+    inputs, samples = make_occ_batch(
+        batch_size=2,
+        num_cams=2,
+        img_shape=(32, 64),
+        num_points=num_points,
+        occ_shape=(8, 8, 4),
+        pc_range=PC_RANGE,
+        num_classes=NUM_CLASSES)
+    for sample in samples:
+        # 2D labels 1..2 where a point projects, 255 elsewhere.
+        labels = 1 + (sample.gt_depth > 4).long()
+        sample.gt_seg_2d = torch.where(sample.gt_depth > 0, labels,
+                                       torch.full_like(labels, 255))
+    return inputs, samples
+
+
+def _model(variant):
+    torch.manual_seed(0)
+    return MODELS.build(_cfg(variant))
+
+
+def _count_calls(module):
+    calls = []
+    module.register_forward_pre_hook(lambda *args: calls.append(1))
+    return calls
+
+
+@pytest.mark.parametrize('variant', ['fusion', 'kl'])
+def test_loss_forward_backward(variant):
+    """Every loss is finite, the total back-propagates into the image
+    backbone, the LiDAR encoder and the fusion (the teacher of SDG-KL is
+    trained by its own occupancy loss). Sample 1 has no LiDAR point."""
+    model = _model(variant).train()
+    inputs, samples = _batch()
+    losses = model(inputs, samples, mode='loss')
+    expected = {'loss_focal', 'loss_depth', 'loss_seg'}
+    if variant == 'kl':
+        expected |= {'loss_focal_teacher', 'loss_distill'}
+    assert set(losses) == expected
+    assert all(torch.isfinite(v) for v in losses.values())
+    sum(losses.values()).backward()
+    for part in ('img_backbone', 'lidar_encoder', 'fusion', 'occ_head'):
+        grads = [
+            p.grad.abs().sum() for p in getattr(model, part).parameters()
+            if p.grad is not None
+        ]
+        assert grads and sum(grads) > 0, part
+
+
+def test_kl_distillation_is_one_way():
+    """Back-propagating only FOAD's loss leaves the teacher side (LiDAR
+    encoder, fusion) without gradient and moves the camera side."""
+    model = _model('kl').train()
+    inputs, samples = _batch(num_points=(60, 60))
+    losses = model(inputs, samples, mode='loss')
+    assert losses['loss_distill'] > 0
+    losses['loss_distill'].backward()
+    for part in ('lidar_encoder', 'fusion'):
+        assert all(p.grad is None or p.grad.abs().sum() == 0
+                   for p in getattr(model, part).parameters()), part
+    assert any(p.grad is not None and p.grad.abs().sum() > 0
+               for p in model.depth_net.parameters())
+
+
+def test_kl_inference_skips_lidar_encoder_and_fusion():
+    """SDG-KL's predict and tensor modes never run the SPVCNN branch or the
+    fusion; SDG-Fusion's run each once per call; training KL runs both."""
+    kl = _model('kl').eval()
+    enc_calls, fusion_calls = (_count_calls(kl.lidar_encoder),
+                               _count_calls(kl.fusion))
+    inputs, samples = _batch()
+    with torch.no_grad():
+        preds = kl(inputs, samples, mode='predict')
+        logits = kl(inputs, samples, mode='tensor')
+    assert enc_calls == [] and fusion_calls == []
+    assert logits.shape == (2, NUM_CLASSES, 8, 8, 4)
+    assert preds[0].pred_occ.shape == (8, 8, 4)
+    assert preds[0].pred_occ.dtype == torch.long
+    assert hasattr(preds[0], 'gt_occ') and hasattr(preds[0], 'mask_camera')
+    kl.train()
+    kl(inputs, samples, mode='loss')
+    assert len(enc_calls) == 1 and len(fusion_calls) == 1
+
+    fusion = _model('fusion').eval()
+    enc_calls = _count_calls(fusion.lidar_encoder)
+    with torch.no_grad():
+        fusion(inputs, samples, mode='predict')
+    assert len(enc_calls) == 1
+
+
+def test_predict_matches_tensor_mode():
+    """pred_occ is the argmax over classes of the tensor-mode logits."""
+    model = _model('fusion').eval()
+    inputs, samples = _batch()
+    with torch.no_grad():
+        logits = model(inputs, samples, mode='tensor')
+        preds = model(inputs, samples, mode='predict')
+    for b in range(2):
+        assert torch.equal(preds[b].pred_occ, logits[b].argmax(0))
+
+
+def test_all_ignored_targets_and_no_points():
+    """No point anywhere and every voxel ignored: losses are zero or
+    finite and backward still runs."""
+    model = _model('kl').train()
+    inputs, samples = _batch(num_points=(0, ))
+    for sample in samples:
+        sample.gt_occ[:] = 255
+    losses = model(inputs, samples, mode='loss')
+    assert losses['loss_focal'] == 0 and losses['loss_depth'] == 0
+    assert losses['loss_distill'] == 0
+    sum(losses.values()).backward()
+
+
+def test_bad_config_and_inputs_raise():
+    cfg = _cfg('kl')
+    cfg.pop('distill_loss')
+    with pytest.raises(ValueError, match='distill_loss'):
+        MODELS.build(cfg)
+    with pytest.raises(ValueError, match='variant'):
+        MODELS.build(_cfg('camera'))
+    model = _model('fusion').train()
+    inputs, samples = _batch()
+    with pytest.raises(ValueError, match='points'):
+        model.predict(dict(imgs=inputs['imgs']), samples)
+    del samples[1].gt_seg_2d
+    with pytest.raises(ValueError, match="data sample 1 has no 'gt_seg_2d'"):
+        model.loss(inputs, samples)

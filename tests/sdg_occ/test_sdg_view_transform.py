@@ -1,0 +1,205 @@
+"""Tests of ``SDGViewTransform`` and ``points_to_depth_maps``."""
+import math
+
+import pytest
+import torch
+
+from projects.occ_common.testing.occ_inputs import ring_camera_rig
+from projects.sdg_occ import (SDGViewTransform, points_to_depth_maps,
+                              semantic_depth_diffusion)
+
+IMG_SHAPE = (16, 32)  # (H, W); features (2, 4): stride 8
+FEAT_SHAPE = (2, 4)
+FOCAL = 16.0
+# 2.5 m cells; the 0.1 m shift keeps the integer bin depths off the cell
+# edges, where float32 and float64 could round to different cells.
+PC_RANGE = (-10.1, -10.1, -3.0, 9.9, 9.9, 3.0)
+BEV_SHAPE = (8, 8)
+DEPTH_BOUND = (1.0, 9.0, 1.0)  # 8 bins at 1 .. 8 m
+
+
+def _rig(num_cams):
+    cam2img, lidar2cam = ring_camera_rig(num_cams, IMG_SHAPE, FOCAL)
+    return cam2img, lidar2cam, (cam2img @ lidar2cam).float()
+
+
+def test_points_to_depth_maps_by_hand():
+    """Camera 0 looks along +x, principal point (16, 8), f = 16, stride 8.
+
+    (10, 0, 0) -> u = 16, v = 8 -> cell (floor(8 / 8), floor(16 / 8))
+    = (1, 2), depth 10; (5, 0, 0) hits the same cell nearer -> 5 wins.
+    (8, 4, 0): camera x = -4 -> u = 16 - 16 * 4 / 8 = 8 -> cell (1, 1),
+    depth 8. (4, 0, 2.5): v = 8 - 16 * 2.5 / 4 = -2 -> above the image.
+    (-5, 0, 0) is behind the camera. Sample 1 has no point -> zeros.
+    """
+    _, _, lidar2img = _rig(1)
+    pts = torch.tensor([[10., 0., 0., 1., 0.], [5., 0., 0., 1., 0.],
+                        [8., 4., 0., 1., 0.], [4., 0., 2.5, 1., 0.],
+                        [-5., 0., 0., 1., 0.]])
+    depth = points_to_depth_maps([pts, torch.zeros(0, 5)],
+                                 lidar2img[None].expand(2, -1, -1, -1),
+                                 IMG_SHAPE, FEAT_SHAPE)
+    expected = torch.zeros(2, 2, 4)
+    expected[0, 1, 1] = 8.0
+    expected[0, 1, 2] = 5.0
+    assert torch.equal(depth, expected)
+
+
+def _naive_bev(context, prob, ext, lidar2cam, cam2img, vt, num_cams):
+    """Reference lift with per-pixel loops and the closed-form pinhole.
+
+    A pixel (i, j) sits at u = (j + 0.5) * 8, v = (i + 0.5) * 8;
+    at depth d its camera point is ((u - cx) d / f, (v - cy) d / f, d),
+    mapped to the LiDAR frame by inv(lidar2cam).
+    """
+    num_m, chans, feat_h, feat_w = context.shape
+    batch = num_m // num_cams
+    bev = torch.zeros(batch, chans, *BEV_SHAPE, dtype=torch.float64)
+    mask = torch.zeros(batch, 1, *BEV_SHAPE, dtype=torch.bool)
+    count = 0
+    dmin, _, step = DEPTH_BOUND
+    num_bins = prob.shape[1]
+    layers = (torch.linspace(-vt.layer_radius, vt.layer_radius,
+                             vt.num_layers).tolist())
+    for m in range(num_m):
+        cam2lidar = torch.linalg.inv(lidar2cam[m % num_cams])
+        fx, cx, cy = (float(cam2img[m % num_cams, 0, 0]),
+                      float(cam2img[m % num_cams, 0, 2]),
+                      float(cam2img[m % num_cams, 1, 2]))
+        for i in range(feat_h):
+            for j in range(feat_w):
+                u, v = (j + 0.5) * 8, (i + 0.5) * 8
+                if ext[m, i, j] > 0:
+                    cands = []
+                    for off in layers:
+                        d = float(ext[m, i, j]) + off
+                        pos = (d - dmin) / step
+                        if not 0 <= pos <= num_bins - 1:
+                            continue
+                        k = min(int(math.floor(pos)), num_bins - 1)
+                        t = pos - k
+                        p_hi = prob[m, min(k + 1, num_bins - 1), i, j]
+                        cands.append((d, (1 - t) * prob[m, k, i, j] +
+                                      t * p_hi))
+                elif vt.fallback == 'lss':
+                    cands = [(dmin + k * step, prob[m, k, i, j])
+                             for k in range(num_bins)]
+                else:
+                    cands = []
+                for d, w in cands:
+                    cam = torch.tensor([(u - cx) * d / fx, (v - cy) * d / fx,
+                                        d, 1.0], dtype=torch.float64)
+                    x, y, z = (cam2lidar @ cam)[:3].tolist()
+                    ix = math.floor((x - PC_RANGE[0]) / 2.5)
+                    iy = math.floor((y - PC_RANGE[1]) / 2.5)
+                    if not (0 <= ix < 8 and 0 <= iy < 8
+                            and PC_RANGE[2] <= z < PC_RANGE[5]):
+                        continue
+                    b = m // num_cams
+                    bev[b, :, iy, ix] += float(w) * context[m, :, i,
+                                                            j].double()
+                    mask[b, 0, iy, ix] = True
+                    count += 1
+    return bev.float(), mask, count
+
+
+def _inputs(num_cams=2, seed=0):
+    gen = torch.Generator().manual_seed(seed)
+    context = torch.randn(num_cams, 3, *FEAT_SHAPE, generator=gen)
+    prob = torch.randn(num_cams, 8, *FEAT_SHAPE, generator=gen).softmax(1)
+    seg_logits = torch.zeros(num_cams, 3, *FEAT_SHAPE)
+    seg_logits[:, 1] = 1.0  # class 1 everywhere ...
+    seg_logits[:, 2, :, 0] = 2.0  # ... but class 2 in column 0
+    # Camera 0 looks along +x, camera 1 along -x (ring of 2).
+    pts = torch.tensor([[5.0, 0.0, 0.0, 1.0, 0.0], [-3.0, 0.5, 0.2, 1.0,
+                                                    0.0]])
+    return context, prob, seg_logits, [pts]
+
+
+@pytest.mark.parametrize('fallback', ['lss', 'none'])
+def test_sdg_lift_matches_naive_loop(fallback):
+    """SDG points (r = 1 m, 3 layers) plus the LSS fallback equal the loop.
+
+    With radius 1 the return at cell (1, 2) of camera 0 spreads to its
+    class-1 neighbours (0, 2), (1, 1), (1, 3); column 0 is class 2 and
+    stays without depth, as do the pixels out of reach.
+    """
+    cam2img, lidar2cam, lidar2img = _rig(2)
+    context, prob, seg_logits, points = _inputs()
+    vt = SDGViewTransform(PC_RANGE, BEV_SHAPE, DEPTH_BOUND,
+                          diffusion_radius=1.0, layer_radius=1.0,
+                          num_layers=3, fallback=fallback)
+    out = vt(context, prob, seg_logits, points, lidar2img[None], IMG_SHAPE)
+    sparse = points_to_depth_maps(points, lidar2img[None], IMG_SHAPE,
+                                  FEAT_SHAPE)
+    ext = semantic_depth_diffusion(sparse, seg_logits.argmax(1), 1.0)
+    assert torch.equal(out['ext_depth'], ext)
+    assert ext[0, 1, 2] == 5.0
+    assert (ext[0] > 0).sum() == 4 and (ext[0, :, 0] == 0).all()
+    ref, ref_mask, count = _naive_bev(context, prob, ext, lidar2cam.double(),
+                                      cam2img.double(), vt, 2)
+    assert torch.allclose(out['bev'], ref, atol=1e-5)
+    assert torch.equal(out['bev_mask'], ref_mask)
+    assert int(out['num_sdg_points'] + out['num_lss_points']) == count
+    if fallback == 'none':
+        assert out['num_lss_points'] == 0
+
+
+def test_plain_lss_baseline_matches_naive_loop_and_caches():
+    """use_sdg=False lifts every pixel over all 8 bins; the second call on
+    the same rig reuses the cached frustum indices."""
+    cam2img, lidar2cam, lidar2img = _rig(2)
+    context, prob, _, points = _inputs(seed=1)
+    vt = SDGViewTransform(PC_RANGE, BEV_SHAPE, DEPTH_BOUND, use_sdg=False)
+    out = vt(context, prob, None, points, lidar2img[None], IMG_SHAPE)
+    no_ext = torch.zeros(2, *FEAT_SHAPE)
+    ref, ref_mask, count = _naive_bev(context, prob, no_ext,
+                                      lidar2cam.double(), cam2img.double(),
+                                      vt, 2)
+    assert torch.allclose(out['bev'], ref, atol=1e-5)
+    assert torch.equal(out['bev_mask'], ref_mask)
+    assert out['num_lss_points'] == count and out['num_sdg_points'] == 0
+    vt(context, prob, None, points, lidar2img[None], IMG_SHAPE)
+    assert vt.lss_cache.misses == 1 and vt.lss_cache.hits == 1
+
+
+def test_no_points_and_backward():
+    """No LiDAR point: SDG adds nothing; with fallback 'none' the BEV is
+    empty, yet backward runs (zero gradient); with 'lss' gradients reach
+    the context features and the depth distribution."""
+    _, _, lidar2img = _rig(2)
+    context, prob, seg_logits, _ = _inputs()
+    context.requires_grad_(True)
+    prob.requires_grad_(True)
+    vt = SDGViewTransform(PC_RANGE, BEV_SHAPE, DEPTH_BOUND, fallback='none')
+    out = vt(context, prob, seg_logits, [torch.zeros(0, 5)], lidar2img[None],
+             IMG_SHAPE)
+    assert out['bev'].abs().sum() == 0 and not out['bev_mask'].any()
+    assert out['num_sdg_points'] == 0 and out['num_lss_points'] == 0
+    out['bev'].sum().backward()
+    assert context.grad.abs().sum() == 0
+
+    vt = SDGViewTransform(PC_RANGE, BEV_SHAPE, DEPTH_BOUND)
+    out = vt(context, prob, seg_logits, _inputs()[3], lidar2img[None],
+             IMG_SHAPE)
+    out['bev'].pow(2).sum().backward()
+    assert context.grad.abs().sum() > 0 and prob.grad.abs().sum() > 0
+
+
+def test_bad_inputs_raise():
+    _, _, lidar2img = _rig(2)
+    context, prob, seg_logits, points = _inputs()
+    with pytest.raises(ValueError, match='fallback'):
+        SDGViewTransform(PC_RANGE, BEV_SHAPE, DEPTH_BOUND, fallback='all')
+    with pytest.raises(ValueError, match='use_sdg=False'):
+        SDGViewTransform(PC_RANGE, BEV_SHAPE, DEPTH_BOUND, use_sdg=False,
+                         fallback='none')
+    vt = SDGViewTransform(PC_RANGE, BEV_SHAPE, DEPTH_BOUND)
+    with pytest.raises(ValueError, match='depth_prob'):
+        vt(context, prob[:, :4], seg_logits, points, lidar2img[None],
+           IMG_SHAPE)
+    with pytest.raises(ValueError, match='seg_logits'):
+        vt(context, prob, None, points, lidar2img[None], IMG_SHAPE)
+    with pytest.raises(ValueError, match='point clouds'):
+        points_to_depth_maps(points * 2, lidar2img[None], IMG_SHAPE,
+                             FEAT_SHAPE)
