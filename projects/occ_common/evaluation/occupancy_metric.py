@@ -7,17 +7,17 @@ from mmdet3d.registry import METRICS
 from mmengine.evaluator import BaseMetric
 from mmengine.logging import print_log
 
+from ..datasets.nuscenes_classes import OCC3D_CLASS_NAMES
+from ..datasets.occ_formats import SURROUNDOCC_CLASS_NAMES
 from .occupancy_confusion import (confusion_matrix, geometric_iou, mean_iou,
                                   per_class_iou)
 
-_NUSCENES_16 = ('barrier', 'bicycle', 'bus', 'car', 'construction_vehicle',
-                'motorcycle', 'pedestrian', 'traffic_cone', 'trailer',
-                'truck', 'driveable_surface', 'other_flat', 'sidewalk',
-                'terrain', 'manmade', 'vegetation')
+# The label tables live once, in datasets/, so that the metric cannot
+# disagree with the loaders on an index.
 #: SurroundOcc labels: 0 is empty, 1-16 the nuScenes-lidarseg classes.
-SURROUNDOCC_CLASSES = ('empty', ) + _NUSCENES_16
+SURROUNDOCC_CLASSES = SURROUNDOCC_CLASS_NAMES
 #: Occ3D-nuScenes labels: 0 is ``others``, 1-16 as above, 17 is ``free``.
-OCC3D_CLASSES = ('others', ) + _NUSCENES_16 + ('free', )
+OCC3D_CLASSES = OCC3D_CLASS_NAMES
 
 
 def _as_tensor(value) -> torch.Tensor:

@@ -272,3 +272,16 @@ def test_defaults_registry_and_prefix():
     assert metrics['occ/mIoU'] == pytest.approx(100.0)
     assert metrics['occ/IoU'] == pytest.approx(100.0)
     assert math.isnan(metrics['occ/vegetation'])
+
+
+def test_default_classes_are_the_label_formats():
+    """The metric's default class lists are the loaders' (one table, in
+    datasets/), with the empty class where each convention puts it:
+    SurroundOcc 'empty' = 0 = OCC_FORMATS empty_label, Occ3D 'free' = 17;
+    so label k means the same class in GT, loss and metric."""
+    from projects.occ_common.datasets.occ_formats import OCC_FORMATS
+    for convention in ('surroundocc', 'occ3d'):
+        metric = OccupancyMetric(convention=convention)
+        spec = OCC_FORMATS[convention]
+        assert metric.class_names == spec.class_names
+        assert metric.empty_index == spec.empty_label

@@ -168,8 +168,11 @@ class DepthBCELoss(nn.Module):
         pred = depth_pred.float().permute(0, 2, 3, 1).reshape(
             -1, self.num_bins)
         # Over an empty selection the sum is a connected zero, so the
-        # no-LiDAR batch needs no special case.
-        bce = F.binary_cross_entropy(
-            pred[valid], target[valid], reduction='none').sum()
+        # no-LiDAR batch needs no special case. CUDA autocast refuses
+        # binary_cross_entropy outright (``--amp``), so it runs outside it,
+        # in float32, as BEVDepth does.
+        with torch.autocast(device_type=pred.device.type, enabled=False):
+            bce = F.binary_cross_entropy(
+                pred[valid], target[valid], reduction='none').sum()
         loss = bce / valid.sum().clamp(min=1)
         return self.loss_weight * loss

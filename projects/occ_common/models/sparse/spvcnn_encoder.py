@@ -265,7 +265,13 @@ class SPVCNNEncoder(BaseModule):
     def _to_bev(self, x: SparseTensor) -> Tensor:
         """Compress the last stage into the BEV map. Shape (B, C, H, W)."""
         if self.bev_reduce == 'concat':
-            return self.bev_proj(to_dense_bev(x, 'concat'))
+            bev = self.bev_proj(to_dense_bev(x, 'concat'))
+            # The dense 1x1 conv's batch-norm shift would light up empty
+            # columns; keep them zero, as the pooled reductions do.
+            coords = x.coords.long()
+            active = bev.new_zeros(x.batch_size, 1, *bev.shape[2:])
+            active[coords[:, 0], 0, coords[:, 2], coords[:, 3]] = 1
+            return bev * active
         cell_y, cell_x = self._bev_cells(x.coords, self.total_stride)
         return scatter_bev(
             self.bev_proj(x.features), x.coords[:, 0], cell_y, cell_x,

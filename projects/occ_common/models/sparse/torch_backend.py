@@ -51,8 +51,11 @@ def rulebook_conv(features: Tensor, weight: Tensor, bias: Optional[Tensor],
             zip(rulebook.in_indices, rulebook.out_indices)):
         if k == center or rows_in.numel() == 0:
             continue
-        out.index_add_(0, rows_out,
-                       features.index_select(0, rows_in) @ kernels[k])
+        # Under autocast the product is half / bfloat16 while the zeros of
+        # a strided conv keep the features' dtype; index_add_ needs one.
+        out.index_add_(
+            0, rows_out,
+            (features.index_select(0, rows_in) @ kernels[k]).to(out.dtype))
     if center is None and rulebook.num_pairs == 0:
         # No pair touched the weight: keep it (and the features) in the
         # graph so that backward through an empty batch still works.

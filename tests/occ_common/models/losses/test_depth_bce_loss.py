@@ -89,3 +89,49 @@ def test_default_bins_and_bad_inputs():
         patch_min_depth(torch.zeros(1, 5, 4), 2)
     with pytest.raises(ValueError, match='dmin < dmax'):
         DepthBCELoss(depth_bound=(5.0, 1.0, 1.0))
+
+
+def _hand_case():
+    """The two-pixel prediction of test_depth_loss_hand_computed."""
+    pred = torch.zeros(1, 4, 2, 2)
+    pred[0, :, 0, 0] = 0.25
+    pred[0, :, 1, 1] = torch.tensor([0.5, 0.5, 0.0, 0.0])
+    return pred
+
+
+def test_depth_loss_under_autocast(monkeypatch):
+    """``--amp`` wraps the loss in autocast, where CUDA refuses
+    ``binary_cross_entropy`` ("unsafe to autocast"). Emulating that refusal
+    on CPU, the loss still runs (autocast is off around the BCE) and gives
+    the float32 value of test_depth_loss_hand_computed, 5.4534523."""
+    from projects.occ_common.models.losses import depth_bce_loss
+    real_bce = depth_bce_loss.F.binary_cross_entropy
+
+    def refusing_bce(*args, **kwargs):
+        if torch.is_autocast_enabled('cpu'):
+            raise RuntimeError('binary_cross_entropy is unsafe to autocast')
+        return real_bce(*args, **kwargs)
+
+    monkeypatch.setattr(depth_bce_loss.F, 'binary_cross_entropy',
+                        refusing_bce)
+    pred = _hand_case().requires_grad_()
+    with torch.autocast('cpu', dtype=torch.bfloat16):
+        loss = DepthBCELoss(depth_bound=BOUND, downsample=2)(pred,
+                                                             _depth_map())
+    assert loss.dtype == torch.float32
+    assert loss.item() == pytest.approx(5.4534523, abs=1e-6)
+    loss.backward()
+    assert torch.isfinite(pred.grad).all()
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason='needs CUDA')
+def test_depth_loss_under_cuda_autocast():
+    """Real CUDA float16 autocast: no 'unsafe to autocast' error, and the
+    float32 value 5.4534523 of test_depth_loss_hand_computed."""
+    pred = _hand_case().cuda().half().requires_grad_()
+    with torch.autocast('cuda', dtype=torch.float16):
+        loss = DepthBCELoss(depth_bound=BOUND, downsample=2)(
+            pred, _depth_map().cuda())
+    assert loss.item() == pytest.approx(5.4534523, abs=1e-5)
+    loss.backward()
+    assert torch.isfinite(pred.grad).all()

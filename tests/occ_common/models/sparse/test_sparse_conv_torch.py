@@ -182,6 +182,34 @@ def test_inverse_conv_matches_conv_transpose3d():
         torch.testing.assert_close(got, ref)
 
 
+def test_convs_run_under_autocast():
+    """Under autocast (``--amp``; bfloat16 on CPU stands in for CUDA's
+    float16) the per-offset products are low precision while a strided or
+    inverse conv starts from zeros of the features' float32: the scatter
+    must still work, give the float32 result to bfloat16 precision (8
+    mantissa bits: relative error ~ 2^-8 per product, a few 1e-2 after
+    summing 27 offsets) and backpropagate to float32 weights."""
+    x = _random_sparse(24)
+    subm = SubMConv(2, 3, 3, indice_key='s', backend='torch')
+    down = SparseConv(3, 4, 3, stride=2, padding=1, indice_key='d',
+                      backend='torch')
+    up = SparseInverseConv(4, 2, 3, 'd', backend='torch')
+
+    def chain():
+        return up(down(subm(x))).features
+
+    reference = chain()
+    with torch.autocast('cpu', dtype=torch.bfloat16):
+        low = chain()
+    assert low.shape == reference.shape == (24, 2)
+    torch.testing.assert_close(low.float(), reference, rtol=0.1, atol=0.05)
+    low.float().sum().backward()
+    for layer in (subm, down, up):
+        assert layer.weight.grad.dtype == torch.float32
+        assert bool(torch.isfinite(layer.weight.grad).all())
+        assert torch.count_nonzero(layer.weight.grad) > 0
+
+
 def test_gradcheck_finite_differences():
     """Analytic gradients of subm, strided and inverse convs match central
     finite differences in float64 on 10 sites of a 4x4x4 grid (gradcheck's

@@ -158,6 +158,23 @@ def test_concat_reduction_and_five_columns():
     assert enc.bev_proj[0].weight.grad is not None
 
 
+def test_concat_reduction_is_zero_off_the_mask():
+    """With 'concat' the BEV passes a dense 1x1 conv + BN + ReLU, whose
+    shift (here beta = 0.5, eval mode with running mean 0 and var 1) would
+    give every cell 0.5 / sqrt(1 + 1e-5) > 0. One point at (0.5, 0.5, 0.5)
+    fills only cell (0, 0): the other 15 cells must stay exactly 0, as
+    documented and as with 'max' / 'mean'."""
+    enc = _encoder(bev_reduce='concat').eval()
+    with torch.no_grad():
+        enc.bev_proj[1].bias.fill_(0.5)
+    out = enc([torch.tensor([[0.5, 0.5, 0.5, 0.1]])])
+    expected = torch.zeros(1, 1, 4, 4, dtype=torch.bool)
+    expected[0, 0, 0, 0] = True
+    assert torch.equal(out['bev_mask'], expected)
+    assert out['bev'][~expected.expand_as(out['bev'])].abs().sum() == 0
+    assert bool((out['bev'][0, :, 0, 0] > 0).any())
+
+
 def test_config_errors():
     """Inconsistent configurations raise ValueError naming the problem."""
     with pytest.raises(ValueError, match='coarser than the BEV cells'):
