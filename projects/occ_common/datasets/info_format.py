@@ -10,6 +10,7 @@ layout; :data:`INFO_VERSION` is bumped whenever a key changes meaning, so an
 info file written by another converter (or an older one) is refused instead
 of being misread.
 """
+import re
 from typing import Mapping
 
 #: Version of the info-file schema written by this converter.
@@ -82,5 +83,8 @@ def weather_flags(description: str) -> dict:
     Returns:
         dict: ``is_rainy`` and ``is_night`` (bool).
     """
+    # Word starts, so that "terrain", "train" or "overnight" do not count.
     text = description.lower()
-    return dict(is_rainy='rain' in text, is_night='night' in text)
+    return dict(
+        is_rainy=re.search(r'\brain', text) is not None,
+        is_night=re.search(r'\bnight', text) is not None)

@@ -71,3 +71,17 @@ def test_check_info_file():
         check_info_file([], 'b.pkl')
     with pytest.raises(ValueError, match=r"c.pkl: sample t lacks the keys"):
         check_info_file(dict(good, data_list=[dict(token='t')]), 'c.pkl')
+
+
+def test_weather_flags_match_word_starts_only():
+    """'Night, rain, parking lot' is both; 'terrain', 'train' and
+    'overnight' are neither; 'raining' and 'nighttime' count."""
+    from projects.occ_common.datasets.info_format import weather_flags
+    assert weather_flags('Night, rain, parking lot') == dict(
+        is_rainy=True, is_night=True)
+    assert weather_flags('Bus passes train station over terrain') == dict(
+        is_rainy=False, is_night=False)
+    assert weather_flags('Parked overnight') == dict(
+        is_rainy=False, is_night=False)
+    assert weather_flags('Raining at nighttime') == dict(
+        is_rainy=True, is_night=True)
