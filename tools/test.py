@@ -8,6 +8,7 @@ import argparse
 import os
 import os.path as osp
 
+from cpu_dist import finalize_distributed, setup_cpu_distributed
 from mmengine.config import Config, ConfigDict, DictAction
 from mmengine.registry import RUNNERS
 from mmengine.runner import Runner
@@ -101,11 +102,13 @@ def main(argv=None):
     """Build the runner from the config and run the test loop."""
     args = parse_args(argv)
     cfg = build_cfg(args)
+    setup_cpu_distributed(cfg)
     if 'runner_type' not in cfg:
         runner = Runner.from_cfg(cfg)
     else:
         runner = RUNNERS.build(cfg)
     runner.test()
+    finalize_distributed()
 
 
 if __name__ == '__main__':

@@ -8,6 +8,7 @@ import logging
 import os
 import os.path as osp
 
+from cpu_dist import finalize_distributed, setup_cpu_distributed
 from mmengine.config import Config, DictAction
 from mmengine.logging import print_log
 from mmengine.registry import RUNNERS
@@ -119,11 +120,13 @@ def main(argv=None):
     """Build the runner from the config and train."""
     args = parse_args(argv)
     cfg = build_cfg(args)
+    setup_cpu_distributed(cfg)
     if 'runner_type' not in cfg:
         runner = Runner.from_cfg(cfg)
     else:
         runner = RUNNERS.build(cfg)
     runner.train()
+    finalize_distributed()
 
 
 if __name__ == '__main__':

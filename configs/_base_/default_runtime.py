@@ -5,12 +5,30 @@ default_hooks = dict(
     timer=dict(type='IterTimerHook'),
     logger=dict(type='LoggerHook', interval=50),
     param_scheduler=dict(type='ParamSchedulerHook'),
-    checkpoint=dict(type='CheckpointHook', interval=1, max_keep_ckpts=3),
-    sampler_seed=dict(type='DistSamplerSeedHook'))
+    # backend_args: write each .pth atomically (temp file + fsync + rename),
+    # so a crash while saving never leaves a truncated checkpoint; see
+    # projects/occ_common/hooks/atomic_file_backend.py.
+    checkpoint=dict(
+        type='CheckpointHook',
+        interval=1,
+        max_keep_ckpts=3,
+        backend_args=dict(backend='atomic_local')),
+    sampler_seed=dict(type='DistSamplerSeedHook'),
+    # Off until tools/test.py --show-dir DIR sets draw=True: then one
+    # picture (GT, prediction, error; top-down and 3D) per evaluated sample.
+    visualization=dict(type='OccVisualizationHook', draw=False))
 
-# Writes checkpoints that load with torch.load(weights_only=True); see
-# projects/occ_common/hooks/weights_only_checkpoint_hook.py.
-custom_hooks = [dict(type='WeightsOnlyCheckpointHook')]
+custom_hooks = [
+    # Writes checkpoints that load with torch.load(weights_only=True); see
+    # projects/occ_common/hooks/weights_only_checkpoint_hook.py.
+    dict(type='WeightsOnlyCheckpointHook'),
+    # Stops at the first NaN / inf loss term, naming the iteration and the
+    # term, before CheckpointHook can save or rotate checkpoints.
+    dict(type='NonFiniteLossHook'),
+    # Before resuming: removes partial writes and repairs an empty
+    # last_checkpoint left by a crash.
+    dict(type='CheckpointRecoveryHook'),
+]
 
 env_cfg = dict(
     cudnn_benchmark=False,

@@ -81,16 +81,23 @@ class ToyOccupancyModel(BaseModel):
         num_classes (int): Number of classes. Defaults to 3.
         data_preprocessor (dict, optional): Defaults to None.
         init_cfg (dict, optional): Defaults to None.
+        nan_at_iter (int, optional): Make the loss of this training
+            iteration NaN (1-based, counting the ``mode='loss'`` calls of
+            this process), to test the non-finite loss guard. Defaults to
+            None (never).
     """
 
     def __init__(self,
                  in_channels: int = 3,
                  num_classes: int = 3,
                  data_preprocessor: Optional[dict] = None,
-                 init_cfg: Optional[dict] = None) -> None:
+                 init_cfg: Optional[dict] = None,
+                 nan_at_iter: Optional[int] = None) -> None:
         super().__init__(
             data_preprocessor=data_preprocessor, init_cfg=init_cfg)
         self.classifier = nn.Conv3d(in_channels, num_classes, 1)
+        self.nan_at_iter = nan_at_iter
+        self._loss_calls = 0
 
     def forward(self,
                 inputs: Union[Tensor, Sequence[Tensor]],
@@ -112,8 +119,11 @@ class ToyOccupancyModel(BaseModel):
             return logits
         if mode == 'loss':
             gt = torch.stack([s.gt_occ for s in data_samples])
-            return dict(loss_ce=nn.functional.cross_entropy(
-                logits, gt.to(logits.device)))
+            loss = nn.functional.cross_entropy(logits, gt.to(logits.device))
+            self._loss_calls += 1
+            if self._loss_calls == self.nan_at_iter:
+                loss = loss * float('nan')
+            return dict(loss_ce=loss)
         if mode == 'predict':
             for sample, pred in zip(data_samples, logits.argmax(1)):
                 sample.pred_occ = pred

@@ -1,0 +1,84 @@
+"""tools/benchmark.py on the toy config: keys, counts and ratios."""
+import importlib.util
+import json
+import os.path as osp
+
+import numpy as np
+import pytest
+
+ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
+CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ.py')
+
+
+def _tool():
+    """tools/benchmark.py as a module."""
+    spec = importlib.util.spec_from_file_location(
+        'benchmark_tool', osp.join(ROOT, 'tools', 'benchmark.py'))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_single_model_json(tmp_path, capsys):
+    """Toy model: Conv3d(3, 3, 1) has 3 * 3 * 1 * 1 * 1 + 3 = 12 params."""
+    out = tmp_path / 'bench.json'
+    _tool().main([CONFIG, '--runs', '4', '--warmup', '1', '--device', 'cpu',
+                  '--json', str(out)])
+    report = json.loads(out.read_text())
+    assert {'device', 'threads', 'warmup', 'torch', 'models'} <= set(report)
+    (model, ) = report['models']
+    assert model['params'] == model['trainable_params'] == 12
+    assert model['model'] == 'ToyOccupancyModel' and model['batch_size'] == 1
+    latency = model['latency_ms']
+    assert len(latency['runs']) == 4
+    assert 0 < latency['min'] <= latency['p25'] <= latency['median'] \
+        <= latency['p75'] <= latency['max']
+    assert latency['median'] == pytest.approx(np.median(latency['runs']))
+    assert model['peak_memory_mb'] > 0 and model['forward_memory_mb'] >= 0
+    assert model['memory_kind'] == 'cpu_rss_high_water'
+    table = capsys.readouterr().out
+    assert 'latency median (ms)' in table and 'ratio' not in table
+
+
+def test_compare_identical_models(tmp_path, capsys):
+    """--compare toy toy: params ratio exactly 1, latency ratio near 1.
+
+    The toy forward takes milliseconds on a shared 2-core machine, so the
+    latency bound is loose: within a factor 5 either way.
+    """
+    report = _tool().main([CONFIG, '--compare', CONFIG, '--runs', '5',
+                           '--warmup', '2', '--device', 'cpu',
+                           '--batch-size', '2'])
+    assert len(report['models']) == 2
+    assert report['models'][1]['batch_size'] == 2
+    assert report['ratio']['params'] == 1.0
+    assert 0.2 < report['ratio']['latency_median'] < 5.0
+    assert 'ratio 2/1' in capsys.readouterr().out
+
+
+def test_ratios_and_synthetic_batch_errors():
+    """A zero denominator gives None; a config without shapes is named."""
+    tool = _tool()
+    first = dict(params=0, latency_ms=dict(median=2.0),
+                 forward_memory_mb=0.5)
+    second = dict(params=5, latency_ms=dict(median=3.0),
+                  forward_memory_mb=4.0)
+    assert tool.ratios(first, second) == dict(
+        params=None, latency_median=1.5, forward_memory=None)
+    cfg = tool.load_config(CONFIG, None)
+    with pytest.raises(ValueError, match='declares neither'):
+        tool.synthetic_batch(cfg, 1, None)
+    with pytest.raises(SystemExit):
+        tool.parse_args([CONFIG, '--runs', '0'])
+
+
+def test_lidar_like_cloud_lies_in_range():
+    """All points inside the range, on the ground (z = -1.84) or walls."""
+    tool = _tool()
+    gen = np.random.default_rng(0)
+    pc_range = (-40.0, -40.0, -1.0 - 1.0, 40.0, 40.0, 5.4)
+    points = tool.lidar_like_cloud(500, pc_range, 5, gen)
+    assert points.shape == (500, 5) and points.dtype == np.float32
+    assert (points[:, :3] >= np.array(pc_range[:3])).all()
+    assert (points[:, :3] < np.array(pc_range[3:])).all()
+    assert np.isclose(points[:, 2], -1.84, atol=1e-4).mean() > 0.2

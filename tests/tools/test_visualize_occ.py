@@ -1,0 +1,127 @@
+"""tools/visualize_occ.py and tools/test.py --show-dir on the toy config."""
+import glob
+import importlib.util
+import os.path as osp
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import torch
+from PIL import Image
+
+ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
+CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ.py')
+
+
+def _tool():
+    """tools/visualize_occ.py as a module."""
+    spec = importlib.util.spec_from_file_location(
+        'visualize_occ_tool', osp.join(ROOT, 'tools', 'visualize_occ.py'))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _toy_checkpoint(path):
+    """A seeded, untrained toy model saved as a Runner-style checkpoint."""
+    from projects.occ_common.testing.toy_model import ToyOccupancyModel
+    torch.manual_seed(0)
+    model = ToyOccupancyModel(in_channels=3, num_classes=3)
+    torch.save({'meta': {}, 'state_dict': model.state_dict()}, path)
+    return model
+
+
+def _png_size(path):
+    with Image.open(path) as png:
+        return png.size
+
+
+def test_from_saved_npz_and_npy(tmp_path):
+    """pred + GT in one .npz: three columns; a dense .npy alone: one."""
+    gt = np.zeros((8, 8, 4), dtype=np.uint8)
+    gt[:, :, 0] = 11  # driveable_surface in SurroundOcc labels
+    pred = gt.copy()
+    pred[0, 0, 0] = 0
+    np.savez(tmp_path / 's.npz', pred_occ=pred, gt_occ=gt)
+    np.save(tmp_path / 'p.npy', pred)
+    tool = _tool()
+    both = tool.main(['--pred', str(tmp_path / 's.npz'), '--out',
+                      str(tmp_path / 'both.png'), '--view-size', '40', '60'])
+    alone = tool.main(['--pred', str(tmp_path / 'p.npy'), '--out',
+                       str(tmp_path / 'alone.png'), '--view-size', '40',
+                       '60'])
+    assert _png_size(both)[0] > 2 * _png_size(alone)[0]
+
+
+def test_sparse_surroundocc_and_occ3d_labels(tmp_path):
+    """(N, 4) rows become a dense grid; Occ3D 'semantics' is the GT."""
+    tool = _tool()
+    rows = np.array([[0, 0, 0, 4], [7, 7, 3, 16]])
+    dense = tool.sparse_to_dense(rows, (8, 8, 4), 'x.npy')
+    assert dense[0, 0, 0] == 4 and dense[7, 7, 3] == 16
+    assert dense.sum() == 20
+    with pytest.raises(ValueError, match=r'x.npy: voxel \[7, 7, 3\]'):
+        tool.sparse_to_dense(rows, (4, 4, 4), 'x.npy')
+    semantics = np.full((8, 8, 4), 17, dtype=np.uint8)
+    semantics[:, :, 0] = 11
+    np.savez(tmp_path / 'labels.npz', semantics=semantics,
+             mask_camera=np.ones((8, 8, 4), bool))
+    out = tool.main(['--gt', str(tmp_path / 'labels.npz'), '--convention',
+                     'occ3d', '--out', str(tmp_path / 'gt.png'),
+                     '--view-size', '40', '60'])
+    assert osp.isfile(out)
+    with pytest.raises(ValueError, match="expected an array 'pred_occ'"):
+        tool.main(['--pred', str(tmp_path / 'labels.npz'), '--out',
+                   str(tmp_path / 'x.png')])
+
+
+def test_from_config_checkpoint_and_index(tmp_path):
+    """Sample 2 of the toy test split; --save-pred stores argmax exactly.
+
+    The stored prediction equals argmax over classes of the toy model's
+    1x1x1 convolution applied to that sample's features.
+    """
+    model = _toy_checkpoint(tmp_path / 'toy.pth')
+    tool = _tool()
+    tool.main(['--config', CONFIG, '--checkpoint', str(tmp_path / 'toy.pth'),
+               '--index', '2', '--out', str(tmp_path / 'two.png'),
+               '--save-pred', str(tmp_path / 'two.npz'), '--view-size', '40',
+               '60'])
+    from projects.occ_common.testing.toy_model import ToyOccupancyDataset
+    info = ToyOccupancyDataset(num_samples=4, seed=100).get_data_info(2)
+    with torch.no_grad():
+        expected = model(info['inputs'][None]).argmax(1)[0].numpy()
+    with np.load(tmp_path / 'two.npz') as saved:
+        np.testing.assert_array_equal(saved['pred_occ'], expected)
+        np.testing.assert_array_equal(saved['gt_occ'], info['gt_occ'])
+    assert osp.isfile(tmp_path / 'two.png')
+    with pytest.raises(ValueError, match=r'--index 9 .* \(4 samples\)'):
+        tool.main(['--config', CONFIG, '--checkpoint',
+                   str(tmp_path / 'toy.pth'), '--index', '9', '--out',
+                   str(tmp_path / 'x.png')])
+    with pytest.raises(SystemExit):
+        tool.parse_args(['--config', CONFIG, '--out', 'x.png'])
+
+
+@pytest.mark.slow
+def test_test_py_show_dir_writes_one_png_per_sample(tmp_path):
+    """tools/test.py --show-dir: 4 val samples -> 0.png .. 3.png.
+
+    The pictures land in {work_dir}/{timestamp}/show, as mmdet3d's
+    --show-dir help says.
+    """
+    _toy_checkpoint(tmp_path / 'toy.pth')
+    work_dir = str(tmp_path / 'work')
+    proc = subprocess.run(
+        [sys.executable, osp.join(ROOT, 'tools', 'test.py'), CONFIG,
+         str(tmp_path / 'toy.pth'), '--work-dir', work_dir, '--show-dir',
+         'show', '--cfg-options',
+         'default_hooks.visualization.view_size=[60,80]'],
+        cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    pictures = sorted(glob.glob(osp.join(work_dir, '*', 'show', '*.png')))
+    assert [osp.basename(p) for p in pictures] == [
+        '0.png', '1.png', '2.png', '3.png']
+    widths = {_png_size(p)[0] for p in pictures}
+    assert len(widths) == 1

@@ -1,0 +1,484 @@
+#!/usr/bin/env python
+"""Parameters, inference latency and peak memory of a model config.
+
+Like OccCylindrical's Table IV and SDG-OCC's Time column: the model of
+``CONFIG`` (weights from ``CKPT`` if given, else as built) predicts one
+batch, at the config's input size, ``--warmup`` times untimed and then
+``--runs`` times timed; the table gives the median and the spread (std,
+min-max, interquartile range) of the latency. ``--compare CONFIG2`` runs a
+second model in the same process and adds the ratio second / first.
+
+What is timed is ``model.test_step(batch)``: the data preprocessor
+(normalisation, voxelisation), the forward pass and the prediction
+post-processing, as one collated batch leaves the dataloader; file loading
+and augmentation are not. The batch is the first of the config's test
+dataloader (``--batch-size`` samples, 1 by default as in the papers), or
+with ``--synthetic-batch`` random data of the shapes the config declares:
+``len(cam_names)`` images of ``img_size``, a LiDAR-like cloud of
+``--num-points`` points in ``point_cloud_range`` and a ``grid_size``
+label grid, for configs whose data is not at hand.
+
+Peak memory on CUDA is ``torch.cuda.max_memory_allocated`` during one
+call; on CPU it is the process's resident-set high-water mark (Linux
+``VmHWM``, reset through ``/proc/self/clear_refs``; a 1 ms RSS sampler
+where that file is not writable). ``forward_memory_mb`` is the part added
+by the call, ``peak_memory_mb`` the whole process (or all CUDA tensors).
+
+Usage::
+
+    python tools/benchmark.py CONFIG [CKPT] [--compare CONFIG2 [CKPT2]]
+        [--device cuda] [--runs 20] [--warmup 5] [--json OUT]
+
+Like the train and test tools this script imports no plugin code: the
+configs register it through ``custom_imports``.
+"""
+import argparse
+import copy
+import ctypes
+import gc
+import json
+import math
+import os
+import os.path as osp
+import statistics
+import threading
+import time
+from typing import Callable, Dict, List, Optional, Tuple
+
+import numpy as np
+import torch
+from mmengine.config import Config, DictAction
+
+#: Points of one nuScenes LiDAR sweep (32 beams, 20 Hz), on average.
+NUSCENES_SWEEP_POINTS = 34720
+
+
+def parse_args(argv=None):
+    """Parse the command line."""
+    parser = argparse.ArgumentParser(
+        description='Benchmark parameters, latency and memory of configs.')
+    parser.add_argument('config', help='config file')
+    parser.add_argument('checkpoint', nargs='?', help='checkpoint file')
+    parser.add_argument(
+        '--compare',
+        nargs='+',
+        metavar=('CONFIG2', 'CKPT2'),
+        help='a second config (and checkpoint) to run side by side')
+    parser.add_argument(
+        '--device',
+        default='cuda' if torch.cuda.is_available() else 'cpu',
+        help='cpu or cuda[:i] (default: cuda if available)')
+    parser.add_argument('--warmup', type=int, default=3)
+    parser.add_argument('--runs', type=int, default=10)
+    parser.add_argument(
+        '--batch-size', type=int, default=1, help='samples per batch')
+    parser.add_argument(
+        '--synthetic-batch',
+        action='store_true',
+        help='random inputs of the config\'s shapes instead of its test '
+        'data')
+    parser.add_argument(
+        '--num-points',
+        type=int,
+        help='points per synthetic cloud (default: one nuScenes sweep of '
+        f'{NUSCENES_SWEEP_POINTS} points per merged sweep of the config)')
+    parser.add_argument(
+        '--threads', type=int, help='torch CPU threads (default: torch\'s)')
+    parser.add_argument('--json', help='also write the results here')
+    parser.add_argument(
+        '--cfg-options',
+        nargs='+',
+        action=DictAction,
+        help='overrides applied to every config, key=value')
+    args = parser.parse_args(argv)
+    if args.compare is not None and len(args.compare) > 2:
+        parser.error('--compare takes CONFIG2 and an optional CKPT2.')
+    if args.runs < 1 or args.warmup < 0 or args.batch_size < 1:
+        parser.error('expected --runs >= 1, --warmup >= 0, --batch-size '
+                     '>= 1.')
+    return args
+
+
+class PeakMemory:
+    """Peak memory of the code run inside ``with``: see the module doc.
+
+    After ``__exit__``, ``peak_bytes`` is the high-water mark and
+    ``added_bytes`` its excess over the value at ``__enter__``.
+    """
+
+    def __init__(self, device: torch.device) -> None:
+        self.device = device
+        self.peak_bytes = 0
+        self.added_bytes = 0
+        self.kind = ('cuda_max_allocated'
+                     if device.type == 'cuda' else 'cpu_rss_high_water')
+        self._sampler: Optional[threading.Thread] = None
+        self._running = False
+
+    @staticmethod
+    def _status_bytes(field: str) -> int:
+        """A ``/proc/self/status`` field (kB) in bytes."""
+        with open('/proc/self/status') as f:
+            for line in f:
+                if line.startswith(field + ':'):
+                    return int(line.split()[1]) * 1024
+        raise RuntimeError(f'/proc/self/status has no {field}.')
+
+    def _sample(self) -> None:
+        while self._running:
+            self.peak_bytes = max(self.peak_bytes,
+                                  self._status_bytes('VmRSS'))
+            time.sleep(0.001)
+
+    def __enter__(self) -> 'PeakMemory':
+        if self.device.type == 'cuda':
+            torch.cuda.synchronize(self.device)
+            torch.cuda.reset_peak_memory_stats(self.device)
+            self._before = torch.cuda.memory_allocated(self.device)
+            return self
+        gc.collect()
+        try:  # give freed heap back so that RSS starts from what is used
+            ctypes.CDLL('libc.so.6').malloc_trim(0)
+        except OSError:
+            pass
+        self._before = self._status_bytes('VmRSS')
+        try:
+            with open('/proc/self/clear_refs', 'w') as refs:
+                refs.write('5')  # resets VmHWM to the current RSS
+        except OSError:
+            self._running = True
+            self.peak_bytes = self._before
+            self._sampler = threading.Thread(target=self._sample,
+                                             daemon=True)
+            self._sampler.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.device.type == 'cuda':
+            torch.cuda.synchronize(self.device)
+            self.peak_bytes = torch.cuda.max_memory_allocated(self.device)
+        elif self._sampler is not None:
+            self._running = False
+            self._sampler.join()
+        else:
+            self.peak_bytes = self._status_bytes('VmHWM')
+        self.added_bytes = max(0, self.peak_bytes - self._before)
+
+
+def load_config(path: str, options: Optional[dict]) -> Config:
+    """Read a config (importing its plugins) and apply the overrides."""
+    from mmengine.registry import init_default_scope
+    cfg = Config.fromfile(path)
+    if options:
+        cfg.merge_from_dict(options)
+    init_default_scope(cfg.get('default_scope', 'mmdet3d'))
+    return cfg
+
+
+def lidar_like_cloud(num_points: int, pc_range, dims: int,
+                     gen: np.random.Generator) -> np.ndarray:
+    """Returns of a spinning 32-beam LiDAR 1.84 m above the ground.
+
+    Each ray (random azimuth, one of 32 elevations from -30.67 to 10.67
+    degrees) hits a wall of its 1-degree sector (4-45 m away, 1-8 m tall)
+    or the ground z = -1.84 m, whichever is first, so the points lie on
+    surfaces as real returns do (uniform points would fill far more voxels
+    than a real sweep). Points outside ``pc_range`` are dropped and drawn
+    again.
+
+    Returns:
+        np.ndarray: Shape (num_points, dims), float32; x, y, z, then
+        intensity in [0, 1) and zeros.
+    """
+    lo, hi = np.asarray(pc_range[:3]), np.asarray(pc_range[3:])
+    wall_dist = gen.uniform(4.0, 45.0, 360)
+    wall_top = gen.uniform(1.0, 8.0, 360) - 1.84
+    beams = np.radians(np.linspace(-30.67, 10.67, 32))
+    found: List[np.ndarray] = []
+    count = 0
+    while count < num_points:
+        azimuth = gen.uniform(0, 2 * math.pi, 2 * num_points)
+        elevation = beams[gen.integers(0, 32, 2 * num_points)]
+        sector = (np.degrees(azimuth).astype(int)) % 360
+        tan_el = np.tan(elevation)
+        ground = np.where(tan_el < 0, -1.84 / np.minimum(tan_el, -1e-6),
+                          np.inf)
+        hits_wall = wall_dist[sector] * tan_el <= wall_top[sector]
+        dist = np.where(hits_wall, np.minimum(wall_dist[sector], ground),
+                        ground)
+        xyz = np.stack([
+            dist * np.cos(azimuth), dist * np.sin(azimuth), dist * tan_el
+        ], axis=1)
+        keep = np.isfinite(dist) & (xyz >= lo).all(1) & (xyz < hi).all(1)
+        found.append(xyz[keep])
+        count += int(keep.sum())
+    xyz = np.concatenate(found)[:num_points]
+    extra = np.zeros((num_points, max(0, dims - 3)))
+    if dims > 3:
+        extra[:, 0] = gen.random(num_points)
+    return np.concatenate([xyz, extra], axis=1).astype(np.float32)
+
+
+def ring_rig(num_cams: int, img_size: Tuple[int, int]) -> Dict[str, list]:
+    """Cameras round the LiDAR looking outwards, 70 degree field of view.
+
+    Returns:
+        dict: ``cam2img``, ``lidar2cam``, ``lidar2img`` and
+        ``img_aug_matrix`` (identity), each Shape (N, 4, 4).
+    """
+    height, width = img_size
+    focal = width / 2 / math.tan(math.radians(35))
+    cam2img = np.tile(np.eye(4), (num_cams, 1, 1))
+    cam2img[:, 0, 0] = cam2img[:, 1, 1] = focal
+    cam2img[:, 0, 2], cam2img[:, 1, 2] = width / 2, height / 2
+    lidar2cam = np.tile(np.eye(4), (num_cams, 1, 1))
+    for k in range(num_cams):
+        yaw = 2 * math.pi * k / num_cams
+        # Rows: the camera's right, down and forward axes (OpenCV).
+        lidar2cam[k, :3, :3] = [[math.sin(yaw), -math.cos(yaw), 0],
+                                [0, 0, -1], [math.cos(yaw), math.sin(yaw), 0]]
+    aug = np.tile(np.eye(4), (num_cams, 1, 1))
+    return dict(
+        cam2img=cam2img.astype(np.float32),
+        lidar2cam=lidar2cam.astype(np.float32),
+        lidar2img=(aug @ cam2img @ lidar2cam).astype(np.float32),
+        img_aug_matrix=aug.astype(np.float32))
+
+
+def synthetic_batch(cfg: Config, batch_size: int,
+                    num_points: Optional[int]) -> Tuple[dict, str]:
+    """A collated batch of random data of the config's shapes.
+
+    Uses the config's ``cam_names`` and ``img_size`` (images),
+    ``point_cloud_range`` and ``sweeps_num`` (points) and ``grid_size`` /
+    ``voxel_size`` (GT grid and its metainfo), as the dataset configs in
+    ``configs/_base_/datasets`` define them.
+
+    Returns:
+        tuple[dict, str]: The batch (``inputs`` and ``data_samples``, as
+        the dataloader gives them) and a description of its size.
+
+    Raises:
+        ValueError: If the config declares neither images nor points.
+    """
+    from mmdet3d.structures import Det3DDataSample
+    gen = np.random.default_rng(0)
+    has_imgs = cfg.get('cam_names') and cfg.get('img_size')
+    pc_range = cfg.get('point_cloud_range')
+    if not has_imgs and pc_range is None:
+        raise ValueError(f'--synthetic-batch: {cfg.filename} declares '
+                         'neither cam_names / img_size nor '
+                         'point_cloud_range.')
+    if num_points is None:
+        num_points = NUSCENES_SWEEP_POINTS * (cfg.get('sweeps_num', 0) + 1)
+    inputs: Dict[str, list] = {}
+    described = []
+    meta = dict(lidar2ego=np.eye(4, dtype=np.float32),
+                ego2global=np.eye(4, dtype=np.float32),
+                bda_matrix=np.eye(4, dtype=np.float32))
+    if has_imgs:
+        num_cams, (height, width) = len(cfg.cam_names), cfg.img_size
+        inputs['img'] = [
+            torch.from_numpy(
+                gen.integers(0, 256, (num_cams, 3, height, width),
+                             dtype=np.uint8)) for _ in range(batch_size)
+        ]
+        meta.update(ring_rig(num_cams, (height, width)))
+        meta.update(img_shape=(height, width), ori_shape=(height, width),
+                    pad_shape=(height, width), num_views=num_cams,
+                    cam_names=list(cfg.cam_names))
+        described.append(f'{num_cams}x{height}x{width} images')
+    if pc_range is not None:
+        inputs['points'] = [
+            torch.from_numpy(lidar_like_cloud(num_points, pc_range, 5, gen))
+            for _ in range(batch_size)
+        ]
+        meta.update(occ_pc_range=np.asarray(pc_range, np.float32))
+        described.append(f'{num_points} points')
+    grid = cfg.get('grid_size')
+    samples = []
+    for index in range(batch_size):
+        sample = Det3DDataSample(metainfo=dict(meta, sample_idx=index))
+        if grid is not None:
+            sample.gt_occ = torch.zeros(tuple(grid), dtype=torch.long)
+            sample.set_metainfo(
+                dict(occ_voxel_size=np.asarray(cfg.voxel_size, np.float32)))
+            described.append('x'.join(str(g) for g in grid) + ' grid')
+        samples.append(sample)
+    description = f'synthetic: {", ".join(dict.fromkeys(described))}'
+    return dict(inputs=inputs, data_samples=samples), description
+
+
+def test_batch(cfg: Config, batch_size: int) -> Tuple[dict, str]:
+    """The first batch of the config's test dataloader."""
+    from mmengine.runner import Runner
+    loader_cfg = copy.deepcopy(cfg.test_dataloader)
+    loader_cfg.update(batch_size=batch_size, num_workers=0,
+                      persistent_workers=False)
+    loader = Runner.build_dataloader(loader_cfg)
+    batch = next(iter(loader))
+    return batch, f'first test batch of {type(loader.dataset).__name__}'
+
+
+def summarise(times_ms: List[float]) -> Dict[str, float]:
+    """Median and spread of the timed runs."""
+    ordered = sorted(times_ms)
+    quartiles = (np.percentile(ordered, [25, 75]).tolist()
+                 if len(ordered) > 1 else [ordered[0]] * 2)
+    return dict(
+        median=statistics.median(ordered),
+        mean=statistics.fmean(ordered),
+        std=statistics.stdev(ordered) if len(ordered) > 1 else 0.0,
+        min=ordered[0],
+        max=ordered[-1],
+        p25=quartiles[0],
+        p75=quartiles[1],
+        runs=times_ms)
+
+
+def predict_once(model: torch.nn.Module, data: dict,
+                 device: torch.device) -> None:
+    """One timed call: ``test_step`` without autograd, synchronised."""
+    with torch.no_grad():
+        model.test_step(data)
+    if device.type == 'cuda':
+        torch.cuda.synchronize(device)
+
+
+def benchmark_model(config: str, checkpoint: Optional[str], args) -> Dict:
+    """Build, load and time one model; see the module docstring."""
+    from mmengine.registry import MODELS
+    from mmengine.runner import load_checkpoint
+    cfg = load_config(config, args.cfg_options)
+    device = torch.device(args.device)
+    model = MODELS.build(cfg.model)
+    if checkpoint:
+        load_checkpoint(model, checkpoint, map_location='cpu')
+    model.to(device).eval()
+    if args.synthetic_batch:
+        batch, described = synthetic_batch(cfg, args.batch_size,
+                                           args.num_points)
+    else:
+        batch, described = test_batch(cfg, args.batch_size)
+
+    times = []
+    for i in range(args.warmup + args.runs):
+        # A fresh copy each time: test_step writes predictions into it.
+        data = copy.deepcopy(batch)
+        start = time.perf_counter()
+        predict_once(model, data, device)
+        if i >= args.warmup:
+            times.append((time.perf_counter() - start) * 1000)
+    data = copy.deepcopy(batch)
+    with PeakMemory(device) as memory:
+        predict_once(model, data, device)
+    params = sum(p.numel() for p in model.parameters())
+    trainable = sum(p.numel() for p in model.parameters() if p.requires_grad)
+    result = dict(
+        config=config,
+        checkpoint=checkpoint,
+        model=type(model).__name__,
+        input=described,
+        batch_size=args.batch_size,
+        params=params,
+        trainable_params=trainable,
+        latency_ms=summarise(times),
+        peak_memory_mb=memory.peak_bytes / 2**20,
+        forward_memory_mb=memory.added_bytes / 2**20,
+        memory_kind=memory.kind)
+    return result
+
+
+def ratios(first: Dict, second: Dict) -> Dict[str, Optional[float]]:
+    """second / first of params, median latency and forward memory.
+
+    A ratio whose denominator is 0 (or a forward memory under 1 MB) is
+    None.
+    """
+
+    def ratio(a: float, b: float, least: float = 0.0) -> Optional[float]:
+        return b / a if a > least else None
+
+    return dict(
+        params=ratio(first['params'], second['params']),
+        latency_median=ratio(first['latency_ms']['median'],
+                             second['latency_ms']['median']),
+        # Below 1 MB the RSS measure is page-level noise.
+        forward_memory=ratio(first['forward_memory_mb'],
+                             second['forward_memory_mb'], least=1.0))
+
+
+def format_table(report: Dict) -> str:
+    """The results as a fixed-width table."""
+    models = report['models']
+    rows: List[Tuple[str, Callable[[Dict], str]]] = [
+        ('model', lambda r: r['model']),
+        ('params', lambda r: f'{r["params"]:,}'),
+        ('latency median (ms)', lambda r: f'{r["latency_ms"]["median"]:.2f}'),
+        ('latency std (ms)', lambda r: f'{r["latency_ms"]["std"]:.2f}'),
+        ('latency min-max (ms)', lambda r:
+         f'{r["latency_ms"]["min"]:.2f}-{r["latency_ms"]["max"]:.2f}'),
+        ('latency IQR (ms)', lambda r:
+         f'{r["latency_ms"]["p25"]:.2f}-{r["latency_ms"]["p75"]:.2f}'),
+        ('forward memory (MB)', lambda r: f'{r["forward_memory_mb"]:.1f}'),
+        ('peak memory (MB)', lambda r: f'{r["peak_memory_mb"]:.1f}'),
+    ]
+    names = [osp.splitext(osp.basename(r['config']))[0] for r in models]
+    ratio_of = {'params': 'params', 'latency median (ms)':
+                'latency_median', 'forward memory (MB)': 'forward_memory'}
+    header = ['', *names] + (['ratio 2/1'] if 'ratio' in report else [])
+    lines = [header]
+    for label, cell in rows:
+        line = [label, *(cell(r) for r in models)]
+        if 'ratio' in report:
+            value = report['ratio'].get(ratio_of.get(label, ''), None)
+            line.append('' if value is None else f'{value:.3f}')
+        lines.append(line)
+    widths = [max(len(line[i]) for line in lines) for i in range(len(header))]
+    text = [
+        '  '.join(c.ljust(w) if i == 0 else c.rjust(w)
+                  for i, (c, w) in enumerate(zip(line, widths)))
+        for line in lines
+    ]
+    for r in models:
+        runs = len(r['latency_ms']['runs'])
+        text.append(f'{osp.basename(r["config"])}: {r["input"]}, batch '
+                    f'{r["batch_size"]}, {report["device"]}, '
+                    f'{report["threads"]} threads, {runs} runs after '
+                    f'{report["warmup"]} warm-up')
+    return '\n'.join(text)
+
+
+def main(argv=None) -> Dict:
+    """Run the benchmark; print the table and return the report."""
+    args = parse_args(argv)
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    report = dict(
+        device=args.device,
+        threads=torch.get_num_threads(),
+        warmup=args.warmup,
+        torch=torch.__version__,
+        models=[benchmark_model(args.config, args.checkpoint, args)])
+    if args.compare:
+        # The first model is gone (benchmark_model returned): free its
+        # memory so that it does not count towards the second's peak.
+        gc.collect()
+        if torch.cuda.is_available():
+            torch.cuda.empty_cache()
+        second = benchmark_model(args.compare[0], (args.compare[1:] or
+                                                   [None])[0], args)
+        report['models'].append(second)
+        report['ratio'] = ratios(report['models'][0], second)
+    print(format_table(report))
+    if args.json:
+        folder = osp.dirname(osp.abspath(args.json))
+        os.makedirs(folder, exist_ok=True)
+        with open(args.json, 'w') as f:
+            json.dump(report, f, indent=2)
+        print(f'wrote {args.json}')
+    return report
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,243 @@
+#!/usr/bin/env python
+"""Render occupancy grids to a PNG, without a display.
+
+Two sources:
+
+- a model: ``--config C --checkpoint K --index I`` predicts sample ``I`` of
+  the config's test split and draws prediction, GT and error map
+  (``--cameras`` adds the six images with the occupancy projected onto
+  them; ``--save-pred F.npz`` also stores the grids);
+- saved grids: ``--pred F`` and / or ``--gt F``, each an ``.npz`` (keys
+  ``pred_occ`` / ``gt_occ`` / ``mask_camera`` as ``--save-pred`` writes
+  them, or Occ3D's ``labels.npz`` with ``semantics``) or an ``.npy``
+  (a dense (X, Y, Z) grid, or SurroundOcc's sparse (N, 4) ``x, y, z, label``
+  rows, which need ``--grid-shape``).
+
+Examples::
+
+    python tools/visualize_occ.py --config CFG --checkpoint CKPT \\
+        --index 0 --out sample0.png
+    python tools/visualize_occ.py --pred sample0.npz --out sample0.png
+    python tools/visualize_occ.py --gt data/gts/scene/token/labels.npz \\
+        --convention occ3d --out gt.png
+
+Unlike the train and test tools this script imports the plugin's renderer
+directly: it draws grids that need no config.
+"""
+import argparse
+import os.path as osp
+import sys
+from typing import Dict, Optional, Sequence
+
+import numpy as np
+import torch
+from mmengine.config import DictAction
+
+sys.path.insert(0, osp.dirname(osp.dirname(osp.abspath(__file__))))
+
+from projects.occ_common.visualization import (  # noqa: E402
+    convention_classes, render_data_sample, sample_field, save_png)
+
+
+def parse_args(argv=None):
+    """Parse the command line."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--out', required=True, help='output PNG file')
+    model = parser.add_argument_group('from a model')
+    model.add_argument('--config', help='config file')
+    model.add_argument('--checkpoint', help='checkpoint file')
+    model.add_argument(
+        '--index', type=int, default=0, help='sample index in the test set')
+    model.add_argument(
+        '--cameras',
+        action='store_true',
+        help='add the camera images with the occupancy projected onto them')
+    model.add_argument(
+        '--save-pred', help='also store pred / GT / mask in this .npz')
+    model.add_argument('--device', default='cpu', help='e.g. cpu, cuda:0')
+    model.add_argument(
+        '--cfg-options',
+        nargs='+',
+        action=DictAction,
+        help='config overrides key=value (as tools/test.py)')
+    saved = parser.add_argument_group('from saved grids')
+    saved.add_argument('--pred', help='.npz / .npy predicted grid')
+    saved.add_argument('--gt', help='.npz / .npy ground-truth grid')
+    saved.add_argument(
+        '--grid-shape',
+        type=int,
+        nargs=3,
+        default=(200, 200, 16),
+        help='(X, Y, Z) of sparse SurroundOcc .npy files')
+    labels = parser.add_argument_group('labels (from the config if given)')
+    labels.add_argument(
+        '--convention',
+        choices=['surroundocc', 'occ3d'],
+        help='label convention (default: the config\'s metric, else '
+        'surroundocc)')
+    labels.add_argument(
+        '--class-names', nargs='+', help='class names in label order')
+    view = parser.add_argument_group('view')
+    view.add_argument('--azimuth', type=float, default=-150.0)
+    view.add_argument('--elevation', type=float, default=40.0)
+    view.add_argument(
+        '--view-size', type=int, nargs=2, default=(360, 480),
+        help='(H, W) of the 3D views')
+    args = parser.parse_args(argv)
+    from_model = args.config is not None or args.checkpoint is not None
+    if from_model and (args.config is None or args.checkpoint is None):
+        parser.error('--config and --checkpoint go together.')
+    if from_model == (args.pred is not None or args.gt is not None):
+        parser.error('give either --config/--checkpoint or --pred/--gt.')
+    return args
+
+
+def load_grid(path: str, key: str,
+              grid_shape: Sequence[int]) -> Dict[str, np.ndarray]:
+    """Read a saved grid (see the module docstring).
+
+    Args:
+        path (str): ``.npz`` or ``.npy`` file.
+        key (str): ``'pred_occ'`` or ``'gt_occ'``: which grid the file is
+            given for.
+        grid_shape (Sequence[int]): Shape of a sparse SurroundOcc file.
+
+    Returns:
+        dict[str, np.ndarray]: ``key`` and whatever else the file holds of
+        ``pred_occ``, ``gt_occ`` and ``mask_camera``.
+
+    Raises:
+        ValueError: If the file holds no usable grid.
+    """
+    if path.endswith('.npz'):
+        with np.load(path) as data:
+            found = {k: data[k] for k in data.files}
+        if 'semantics' in found:  # Occ3D's labels.npz
+            found.setdefault('gt_occ', found.pop('semantics'))
+        grids = {
+            k: found[k]
+            for k in ('pred_occ', 'gt_occ', 'mask_camera') if k in found
+        }
+        if key not in grids:
+            raise ValueError(f'{path}: expected an array {key!r} (or Occ3D '
+                             f"'semantics'), found {sorted(found)}.")
+        return grids
+    if not path.endswith('.npy'):
+        raise ValueError(f'{path}: expected a .npz or .npy file.')
+    array = np.load(path)
+    if array.ndim == 2 and array.shape[1] == 4:
+        return {key: sparse_to_dense(array, grid_shape, path)}
+    if array.ndim != 3:
+        raise ValueError(f'{path}: expected a dense (X, Y, Z) grid or '
+                         f'sparse (N, 4) rows, got shape {array.shape}.')
+    return {key: array}
+
+
+def sparse_to_dense(rows: np.ndarray, grid_shape: Sequence[int],
+                    path: str) -> np.ndarray:
+    """SurroundOcc's ``x, y, z, label`` rows as a dense grid (0 = empty).
+
+    Raises:
+        ValueError: If an index lies outside ``grid_shape``.
+    """
+    rows = rows.astype(np.int64)
+    shape = np.asarray(grid_shape)
+    outside = (rows[:, :3] < 0).any(1) | (rows[:, :3] >= shape).any(1)
+    if outside.any():
+        raise ValueError(f'{path}: voxel {rows[outside][0, :3].tolist()} is '
+                         f'outside --grid-shape {tuple(grid_shape)}.')
+    dense = np.zeros(tuple(grid_shape), dtype=np.int64)
+    dense[rows[:, 0], rows[:, 1], rows[:, 2]] = rows[:, 3]
+    return dense
+
+
+def metric_labels(cfg) -> Dict:
+    """``convention`` / ``class_names`` of the config's test metric."""
+    evaluator = cfg.get('test_evaluator', {})
+    metrics = evaluator if isinstance(evaluator, list) else [evaluator]
+    for metric in metrics:
+        if 'convention' in metric or 'class_names' in metric:
+            return {
+                k: metric[k]
+                for k in ('convention', 'class_names') if k in metric
+            }
+    return {}
+
+
+def predict_sample(args):
+    """Predict ``args.index`` of the config's test set.
+
+    Returns:
+        tuple: The output data sample, the packed inputs of the sample,
+        and the label settings of the config's metric.
+    """
+    from mmengine.config import Config
+    from mmengine.dataset import pseudo_collate
+    from mmengine.registry import DATASETS, MODELS, init_default_scope
+    from mmengine.runner import load_checkpoint
+
+    cfg = Config.fromfile(args.config)
+    if args.cfg_options:
+        cfg.merge_from_dict(args.cfg_options)
+    init_default_scope(cfg.get('default_scope', 'mmdet3d'))
+    model = MODELS.build(cfg.model)
+    load_checkpoint(model, args.checkpoint, map_location='cpu')
+    model.to(args.device).eval()
+    dataset = DATASETS.build(cfg.test_dataloader.dataset)
+    if not 0 <= args.index < len(dataset):
+        raise ValueError(f'--index {args.index} is outside the test set of '
+                         f'{args.config} ({len(dataset)} samples).')
+    data = pseudo_collate([dataset[args.index]])
+    with torch.no_grad():
+        sample = model.test_step(data)[0]
+    return sample, data['inputs'], metric_labels(cfg)
+
+
+def main(argv=None) -> Optional[str]:
+    """Render and write the picture; returns the output path."""
+    args = parse_args(argv)
+    labels: Dict = {}
+    img = None
+    if args.config is not None:
+        sample, inputs, labels = predict_sample(args)
+        if args.cameras:
+            if not isinstance(inputs, dict) or inputs.get('img') is None:
+                raise ValueError(f'--cameras: the test samples of '
+                                 f'{args.config} carry no images.')
+            img = inputs['img'][0]
+    else:
+        sample = {}
+        if args.gt is not None:
+            sample.update(load_grid(args.gt, 'gt_occ', args.grid_shape))
+        if args.pred is not None:
+            sample.update(load_grid(args.pred, 'pred_occ', args.grid_shape))
+        name = osp.splitext(osp.basename(args.pred or args.gt))[0]
+        sample['sample_idx'] = name
+    convention = args.convention or labels.get('convention', 'surroundocc')
+    default_names, empty_label = convention_classes(convention)
+    class_names = (args.class_names or labels.get('class_names')
+                   or default_names)
+    if args.save_pred:
+        arrays = {}
+        for key in ('pred_occ', 'gt_occ', 'mask_camera'):
+            value = sample_field(sample, key)
+            if torch.is_tensor(value):
+                value = value.cpu().numpy()
+            if value is not None:
+                arrays[key] = np.asarray(value)
+        np.savez_compressed(args.save_pred, **arrays)
+    picture = render_data_sample(
+        sample,
+        class_names,
+        empty_label,
+        img=img,
+        azimuth=args.azimuth,
+        elevation=args.elevation,
+        view_size=tuple(args.view_size))
+    save_png(picture, args.out)
+    print(f'wrote {args.out}')
+    return args.out
+
+
+if __name__ == '__main__':
+    main()
