@@ -16,8 +16,10 @@ lint: setup
 test: lint
 	$(PY) -m pytest tests
 
+# Synthetic world -> train and evaluate both tiny models -> table + pictures
+# in demo_out/ (see README). DEMO_ARGS passes options to tools/demo.py.
 demo: setup
-	@bash tools/demo.sh
+	$(PY) tools/demo.py $(DEMO_ARGS)
 
 clean-env:
 	rm -rf $(VENV)

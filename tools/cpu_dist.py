@@ -40,7 +40,9 @@ def finalize_distributed() -> None:
 
     Without it gloo's threads can abort the process at exit ("terminate
     called without an active exception"); mmengine 0.10.7 never destroys
-    the group.
+    the group. The barrier first makes every rank finish its last
+    collective before any rank tears its connections down.
     """
     if dist.is_available() and dist.is_initialized():
+        dist.barrier()
         dist.destroy_process_group()
