@@ -12,6 +12,8 @@ from mmdet3d.registry import MODELS
 from mmengine.config import Config
 from mmengine.registry import init_default_scope
 
+from projects.occ_common.testing.tool_logs import (last_test_metrics,
+                                                   mean_of_class_ious)
 from projects.occ_cyl import OccCylindrical
 from projects.occ_cyl.cylindrical import CylinderGrid
 
@@ -232,8 +234,11 @@ def test_tiny_config_trains_and_tests(synthetic_root, tmp_path):
     proc = _run('tools/test.py', TINY, osp.join(work_dir, 'epoch_4.pth'),
                 '--work-dir', str(tmp_path / 'test'), '--cfg-options', *data)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    out = proc.stdout + proc.stderr
-    iou = re.findall(r'occ/IoU: ([0-9.]+)', out)
-    miou = re.findall(r'occ/mIoU: ([0-9.]+)', out)
-    assert iou and 0.0 <= float(iou[-1]) <= 100.0
-    assert miou and 0.0 <= float(miou[-1]) <= 100.0
+    metrics = last_test_metrics(str(tmp_path / 'test'))
+    # SurroundOcc: mIoU is the mean over classes 1..16 present in GT or
+    # prediction; IoU is occupied vs empty, within (0, 100) once anything is
+    # predicted occupied.
+    names = Config.fromfile(TINY).class_names[1:]
+    assert metrics['occ/mIoU'] == pytest.approx(
+        mean_of_class_ious(metrics, names), abs=1e-3)
+    assert 0.0 < metrics['occ/IoU'] < 100.0

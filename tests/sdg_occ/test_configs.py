@@ -11,6 +11,8 @@ from mmdet3d.registry import MODELS
 from mmengine.config import Config
 from mmengine.registry import init_default_scope
 
+from projects.occ_common.testing.tool_logs import (last_test_metrics,
+                                                   mean_of_class_ious)
 from projects.sdg_occ import SDGOcc
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
@@ -138,5 +140,10 @@ def test_tiny_config_trains_and_tests(path, synthetic_root, tmp_path):
     proc = _run('tools/test.py', path, osp.join(work_dir, 'epoch_4.pth'),
                 '--work-dir', str(tmp_path / 'test'), '--cfg-options', *data)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    miou = re.findall(r'occ/mIoU: ([0-9.]+)', proc.stdout + proc.stderr)
-    assert miou and 0.0 <= float(miou[-1]) <= 100.0
+    metrics = last_test_metrics(str(tmp_path / 'test'))
+    # Occ3D: mIoU is the mean over classes 0..16 (not 'free') present in
+    # the camera-masked GT or prediction.
+    names = Config.fromfile(path).class_names[:-1]
+    assert metrics['occ/mIoU'] == pytest.approx(
+        mean_of_class_ious(metrics, names), abs=1e-3)
+    assert 0.0 < metrics['occ/IoU'] < 100.0
