@@ -1,14 +1,16 @@
 """The three plugin packages register their names once, in one process."""
+import json
 import subprocess
 import sys
 
 IMPORT_ALL = """
+import json
 import projects.occ_common, projects.occ_cyl, projects.sdg_occ
-from mmdet3d.registry import DATASETS, METRICS, MODELS, TRANSFORMS
-names = {reg.name: sorted(k for k, v in reg.module_dict.items()
-                          if v.__module__.startswith('projects.'))
-         for reg in (DATASETS, METRICS, MODELS, TRANSFORMS)}
-print(names)
+from mmdet3d.registry import DATASETS, HOOKS, METRICS, MODELS, TRANSFORMS
+print(json.dumps({reg.name: {k: v.__module__.split('.')[1]
+                             for k, v in reg.module_dict.items()
+                             if v.__module__.startswith('projects.')}
+                  for reg in (DATASETS, HOOKS, METRICS, MODELS, TRANSFORMS)}))
 """
 
 
@@ -24,7 +26,18 @@ def test_all_packages_import_together_without_collision():
                           capture_output=True,
                           text=True)
     assert proc.returncode == 0, proc.stderr
-    assert 'already registered' not in proc.stderr
+    owner = json.loads(proc.stdout.strip().splitlines()[-1])
+    # Shared names live in occ_common, model names in their own package.
+    assert owner['metric']['OccupancyMetric'] == 'occ_common'
+    assert owner['dataset']['NuScenesOccDataset'] == 'occ_common'
+    assert owner['model']['DepthNet'] == 'occ_common'
+    assert owner['model']['SPVCNNEncoder'] == 'occ_common'
+    assert owner['model']['OccCylindrical'] == 'occ_cyl'
+    assert owner['model']['TPVPolarFusion'] == 'occ_cyl'
+    assert owner['model']['SDGOcc'] == 'sdg_occ'
+    assert owner['model']['NeighborhoodFusion'] == 'sdg_occ'
+    assert owner['hook']['WeightsOnlyCheckpointHook'] == 'occ_common'
+    assert owner['transform']['PackOccInputs'] == 'occ_common'
 
 
 def test_no_plugin_module_forces_a_registration():
