@@ -5,8 +5,6 @@ evaluates the checkpoint with 2 ranks, each seeing half of the 4 val
 samples; the metric gathered across ranks must equal single-process
 tools/test.py on the same checkpoint, to the last digit of the json log.
 """
-import glob
-import json
 import os
 import os.path as osp
 import socket
@@ -14,6 +12,8 @@ import subprocess
 import sys
 
 import pytest
+
+from projects.occ_common.testing.tool_logs import last_test_metrics
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ.py')
@@ -35,14 +35,12 @@ def _run(cmd, env=None):
 
 
 def _metrics(work_dir):
-    """The occ/* values of the last record of the newest json log."""
-    logs = sorted(glob.glob(osp.join(work_dir, '*', '*.json')))
-    assert logs, f'no json log in {work_dir}'
-    with open(logs[-1]) as f:
-        records = [json.loads(line) for line in f if line.strip()]
-    found = [r for r in records if any(k.startswith('occ/') for k in r)]
-    assert found, f'no occ/ metrics in {logs[-1]}'
-    return {k: v for k, v in found[-1].items() if k.startswith('occ/')}
+    """The occ/* values of the newest test run's json log."""
+    return {
+        k: v
+        for k, v in last_test_metrics(work_dir).items()
+        if k.startswith('occ/')
+    }
 
 
 @pytest.mark.slow

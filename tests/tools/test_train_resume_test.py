@@ -3,8 +3,6 @@
 Runs the toy config (tests/data/configs/toy_occ.py) in subprocesses, as a
 user would, with weights-only checkpoint loading left on.
 """
-import glob
-import json
 import os.path as osp
 import subprocess
 import sys
@@ -12,6 +10,8 @@ import sys
 import numpy as np
 import pytest
 import torch
+
+from projects.occ_common.testing.tool_logs import last_test_metrics
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ.py')
@@ -26,14 +26,6 @@ def run_tool(script, *args):
         text=True,
         timeout=300)
     return proc
-
-
-def last_json_log(work_dir):
-    """The records of the newest run's json log in ``work_dir``."""
-    logs = sorted(glob.glob(osp.join(work_dir, '*', '*.json')))
-    assert logs, f'no json log in {work_dir}'
-    with open(logs[-1]) as f:
-        return [json.loads(line) for line in f if line.strip()]
 
 
 def hand_computed_miou(checkpoint):
@@ -89,13 +81,11 @@ def test_train_resume_and_test(tmp_path):
     test_dir = str(tmp_path / 'test')
     proc = run_tool('test.py', CONFIG, ckpt3, '--work-dir', test_dir)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    records = last_json_log(test_dir)
-    miou = [r for r in records if any(k.endswith('mIoU') for k in r)][-1]
-    key = next(k for k in miou if k.endswith('mIoU'))
-    assert miou[key] == pytest.approx(hand_computed_miou(ckpt3), abs=0.01)
+    miou = last_test_metrics(test_dir)['occ/mIoU']
+    assert miou == pytest.approx(hand_computed_miou(ckpt3), abs=0.01)
     # A trained 1x1x1 conv separates one-hot + 0.5 noise well: far above
     # the ~20 % of a random 3-way guess.
-    assert miou[key] > 60
+    assert miou > 60
 
 
 def test_resume_from_explicit_checkpoint_path(tmp_path):
