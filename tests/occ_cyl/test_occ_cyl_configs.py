@@ -1,11 +1,8 @@
 """Every OccCylindrical config builds; the tiny one trains and tests."""
 import glob
-import json
 import math
 import os.path as osp
 import re
-import subprocess
-import sys
 
 import pytest
 from mmdet3d.registry import MODELS
@@ -13,7 +10,9 @@ from mmengine.config import Config
 from mmengine.registry import init_default_scope
 
 from projects.occ_common.testing.tool_logs import (last_test_metrics,
-                                                   mean_of_class_ious)
+                                                   make_converted_world,
+                                                   mean_of_class_ious,
+                                                   run_tool, train_losses)
 from projects.occ_cyl import OccCylindrical
 from projects.occ_cyl.cylindrical import CylinderGrid
 
@@ -23,8 +22,7 @@ MAIN = sorted(glob.glob(osp.join(CONFIG_DIR, '*.py')))
 ABLATIONS = sorted(glob.glob(osp.join(CONFIG_DIR, 'ablations', '*.py')))
 PAPER = osp.join(CONFIG_DIR, 'occcyl_r50-swint_3xb1-24e_surroundocc-nus.py')
 OCC3D = osp.join(CONFIG_DIR, 'occcyl_r50-swint_3xb1-24e_occ3d-nus.py')
-TINY = osp.join(CONFIG_DIR,
-                'occcyl_tiny_1xb1-6e_surroundocc-nus-synthetic.py')
+TINY = osp.join(CONFIG_DIR, 'occcyl_tiny_1xb1-6e_surroundocc-nus-synthetic.py')
 
 
 def _flatten(obj, prefix=''):
@@ -71,12 +69,10 @@ def test_coupled_values_reach_every_module(path):
         allow_failed_imports=False)
     model = cfg.model
     pcr = cfg.point_cloud_range
-    grid = [round((pcr[i + 3] - pcr[i]) / cfg.voxel_size[i])
-            for i in range(3)]
+    grid = [round((pcr[i + 3] - pcr[i]) / cfg.voxel_size[i]) for i in range(3)]
     head = model.occ_head
-    assert [list(s) for s in head.scale_shapes] == [[g // 2**lvl
-                                                     for g in grid]
-                                                    for lvl in range(4)]
+    assert [list(s) for s in head.scale_shapes
+            ] == [[g // 2**lvl for g in grid] for lvl in range(4)]
     assert head.num_classes == len(cfg.class_names)
     assert head.pc_range == pcr
     assert head.cyl_range == model.tpv_fusion.cyl_range
@@ -122,9 +118,11 @@ def test_ablation_deltas():
         name = osp.basename(path).split('_')[0]
         diff = _model_diff(PAPER, path)
         # loss_depth=None removes all its sub-keys.
-        diff = {k.split('.')[0] if k.startswith('loss_depth.') and
-                name == 'occcyl-nodepthsup' else k
-                for k in diff}
+        diff = {
+            k.split('.')[0] if k.startswith('loss_depth.')
+            and name == 'occcyl-nodepthsup' else k
+            for k in diff
+        }
         assert diff == expected[name], name
         model = Config.fromfile(path).model
         if match := re.search(r'-m(\d)$', name):
@@ -164,8 +162,7 @@ def test_paper_model_parameter_count(capsys):
     cfg = Config.fromfile(PAPER)
     init_default_scope(cfg.default_scope)
     model = MODELS.build(cfg.model)
-    backbone = sum(
-        p.numel() for p in model.img_encoder.backbone.parameters())
+    backbone = sum(p.numel() for p in model.img_encoder.backbone.parameters())
     assert backbone == 25_557_032 - (2048 * 1000 + 1000)
     parts = {
         name: sum(p.numel() for p in child.parameters())
@@ -175,42 +172,20 @@ def test_paper_model_parameter_count(capsys):
     assert total == sum(parts.values())
     with capsys.disabled():
         print(f'\nOccCylindrical paper config: {total / 1e6:.2f} M '
-              f'parameters (paper: 111.62 M); ' + ', '.join(
-                  f'{k} {v / 1e6:.2f} M' for k, v in parts.items() if v))
+              f'parameters (paper: 111.62 M); ' +
+              ', '.join(f'{k} {v / 1e6:.2f} M' for k, v in parts.items() if v))
 
 
 # ---------------------------------------------------------------------------
 # End to end: tools/train.py and tools/test.py on a synthetic world.
 # ---------------------------------------------------------------------------
-def _run(*args):
-    return subprocess.run([sys.executable, *args],
-                          cwd=ROOT,
-                          capture_output=True,
-                          text=True,
-                          timeout=1500)
-
-
 @pytest.fixture(scope='module')
 def synthetic_root(tmp_path_factory):
     """Two scenes of two key frames (one for training, one for val), two
     sweeps per key-frame interval, 160x96 images."""
     root = str(tmp_path_factory.mktemp('occcyl') / 'synthetic_nuscenes')
-    proc = _run('tools/create_synthetic_nuscenes.py', root, '--scenes', '2',
-                '--samples', '2', '--sweeps', '2', '--image-size', '160',
-                '96')
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    proc = _run('tools/create_data.py', 'nuscenes', '--root-path', root,
-                '--version', 'v1.0-mini')
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    return root + '/'
-
-
-def _train_losses(work_dir):
-    logs = sorted(glob.glob(osp.join(work_dir, '*', 'vis_data', '*.json')))
-    assert logs, f'no json log in {work_dir}'
-    with open(logs[-1]) as f:
-        records = [json.loads(line) for line in f if line.strip()]
-    return [r['loss'] for r in records if 'loss' in r]
+    return make_converted_world(
+        root, scenes=2, samples=2, sweeps=2, image_size=(160, 96))
 
 
 @pytest.mark.slow
@@ -223,16 +198,16 @@ def test_tiny_config_trains_and_tests(synthetic_root, tmp_path):
         for split in ('train', 'val', 'test')
     ]
     work_dir = str(tmp_path / 'work')
-    proc = _run('tools/train.py', TINY, '--work-dir', work_dir,
-                '--cfg-options', 'train_cfg.max_epochs=4',
-                'train_cfg.val_interval=4',
-                'default_hooks.checkpoint.interval=4', *data)
+    proc = run_tool('train.py', TINY, '--work-dir', work_dir, '--cfg-options',
+                    'train_cfg.max_epochs=4', 'train_cfg.val_interval=4',
+                    'default_hooks.checkpoint.interval=4', *data)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    losses = _train_losses(work_dir)
+    losses = train_losses(work_dir)
     assert len(losses) == 8
     assert sum(losses[-2:]) < sum(losses[:2])
-    proc = _run('tools/test.py', TINY, osp.join(work_dir, 'epoch_4.pth'),
-                '--work-dir', str(tmp_path / 'test'), '--cfg-options', *data)
+    proc = run_tool('test.py', TINY, osp.join(work_dir,
+                                              'epoch_4.pth'), '--work-dir',
+                    str(tmp_path / 'test'), '--cfg-options', *data)
     assert proc.returncode == 0, proc.stderr[-3000:]
     metrics = last_test_metrics(str(tmp_path / 'test'))
     # SurroundOcc: mIoU is the mean over classes 1..16 present in GT or

@@ -1,10 +1,7 @@
 """Every SDG-OCC config builds; the tiny ones train and test end to end."""
 import glob
-import json
 import os.path as osp
 import re
-import subprocess
-import sys
 
 import pytest
 from mmdet3d.registry import MODELS
@@ -12,7 +9,9 @@ from mmengine.config import Config
 from mmengine.registry import init_default_scope
 
 from projects.occ_common.testing.tool_logs import (last_test_metrics,
-                                                   mean_of_class_ious)
+                                                   make_converted_world,
+                                                   mean_of_class_ious,
+                                                   run_tool, train_losses)
 from projects.sdg_occ import SDGOcc
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
@@ -76,9 +75,7 @@ def test_ablation_deltas():
             assert model.view_transform.use_sdg is False
 
 
-@pytest.mark.parametrize(
-    'path', MAIN,
-    ids=lambda p: osp.basename(p)[:-3])
+@pytest.mark.parametrize('path', MAIN, ids=lambda p: osp.basename(p)[:-3])
 def test_model_builds(path):
     cfg = Config.fromfile(path)
     init_default_scope(cfg.default_scope)  # as the Runner does
@@ -90,34 +87,12 @@ def test_model_builds(path):
 # ---------------------------------------------------------------------------
 # End to end: tools/train.py and tools/test.py on a synthetic world.
 # ---------------------------------------------------------------------------
-def _run(*args):
-    return subprocess.run([sys.executable, *args],
-                          cwd=ROOT,
-                          capture_output=True,
-                          text=True,
-                          timeout=900)
-
-
 @pytest.fixture(scope='module')
 def synthetic_root(tmp_path_factory):
     """Two scenes of two key frames (one for training, one for val)."""
     root = str(tmp_path_factory.mktemp('sdg') / 'synthetic_nuscenes')
-    proc = _run('tools/create_synthetic_nuscenes.py', root, '--scenes', '2',
-                '--samples', '2', '--sweeps', '1', '--image-size', '352',
-                '198')
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    proc = _run('tools/create_data.py', 'nuscenes', '--root-path', root,
-                '--version', 'v1.0-mini')
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    return root + '/'
-
-
-def _train_losses(work_dir):
-    logs = sorted(glob.glob(osp.join(work_dir, '*', 'vis_data', '*.json')))
-    assert logs, f'no json log in {work_dir}'
-    with open(logs[-1]) as f:
-        records = [json.loads(line) for line in f if line.strip()]
-    return [r['loss'] for r in records if 'loss' in r]
+    return make_converted_world(
+        root, scenes=2, samples=2, sweeps=1, image_size=(352, 198))
 
 
 @pytest.mark.slow
@@ -129,16 +104,16 @@ def test_tiny_config_trains_and_tests(path, synthetic_root, tmp_path):
         for split in ('train', 'val', 'test')
     ]
     work_dir = str(tmp_path / 'work')
-    proc = _run('tools/train.py', path, '--work-dir', work_dir,
-                '--cfg-options', 'train_cfg.max_epochs=4',
-                'train_cfg.val_interval=4',
-                'default_hooks.checkpoint.interval=4', *data)
+    proc = run_tool('train.py', path, '--work-dir', work_dir, '--cfg-options',
+                    'train_cfg.max_epochs=4', 'train_cfg.val_interval=4',
+                    'default_hooks.checkpoint.interval=4', *data)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    losses = _train_losses(work_dir)
+    losses = train_losses(work_dir)
     assert len(losses) == 8
     assert sum(losses[-2:]) < sum(losses[:2])
-    proc = _run('tools/test.py', path, osp.join(work_dir, 'epoch_4.pth'),
-                '--work-dir', str(tmp_path / 'test'), '--cfg-options', *data)
+    proc = run_tool('test.py', path, osp.join(work_dir,
+                                              'epoch_4.pth'), '--work-dir',
+                    str(tmp_path / 'test'), '--cfg-options', *data)
     assert proc.returncode == 0, proc.stderr[-3000:]
     metrics = last_test_metrics(str(tmp_path / 'test'))
     # Occ3D: mIoU is the mean over classes 0..16 (not 'free') present in

@@ -3,7 +3,12 @@ import glob
 import json
 import math
 import os.path as osp
-from typing import Dict, Sequence
+import subprocess
+import sys
+from typing import Dict, List, Sequence, Tuple
+
+REPO_ROOT = osp.dirname(
+    osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__)))))
 
 
 def last_test_metrics(work_dir: str, prefix: str = 'occ/') -> Dict:
@@ -41,3 +46,57 @@ def mean_of_class_ious(metrics: Dict,
     values = [metrics[f'{prefix}{name}'] for name in class_names]
     finite = [v for v in values if not math.isnan(v)]
     return sum(finite) / len(finite)
+
+
+def train_losses(work_dir: str) -> List[float]:
+    """The total ``loss`` of every logged training iteration, in order.
+
+    Read from the newest run's ``vis_data/*.json`` scalars of ``work_dir``.
+    """
+    logs = sorted(glob.glob(osp.join(work_dir, '*', 'vis_data', '*.json')))
+    if not logs:
+        raise FileNotFoundError(f'no scalars json under {work_dir}')
+    with open(logs[-1]) as f:
+        records = [json.loads(line) for line in f if line.strip()]
+    return [r['loss'] for r in records if 'loss' in r]
+
+
+def run_tool(script: str, *args: str,
+             timeout: float = 900) -> subprocess.CompletedProcess:
+    """Run ``tools/<script>`` with this interpreter from the repo root."""
+    return subprocess.run([sys.executable,
+                           osp.join(REPO_ROOT, 'tools', script), *args],
+                          cwd=REPO_ROOT,
+                          capture_output=True,
+                          text=True,
+                          timeout=timeout)
+
+
+def make_converted_world(root: str, scenes: int, samples: int, sweeps: int,
+                         image_size: Tuple[int, int]) -> str:
+    """Generate a synthetic world with the CLI and convert it.
+
+    Goes through ``tools/create_synthetic_nuscenes.py`` and
+    ``tools/create_data.py`` exactly as a user would.
+
+    Args:
+        root (str): Folder to write the world to.
+        scenes (int): Number of scenes (the last is the val split).
+        samples (int): Key frames per scene.
+        sweeps (int): LiDAR sweeps per key-frame interval.
+        image_size (tuple[int]): ``(W, H)`` of the camera images.
+
+    Returns:
+        str: ``root`` with a trailing slash, as configs expect a data_root.
+    """
+    proc = run_tool('create_synthetic_nuscenes.py', root, '--scenes',
+                    str(scenes), '--samples', str(samples), '--sweeps',
+                    str(sweeps), '--image-size', str(image_size[0]),
+                    str(image_size[1]))
+    if proc.returncode != 0:
+        raise RuntimeError(f'world generation failed: {proc.stderr[-3000:]}')
+    proc = run_tool('create_data.py', 'nuscenes', '--root-path', root,
+                    '--version', 'v1.0-mini')
+    if proc.returncode != 0:
+        raise RuntimeError(f'conversion failed: {proc.stderr[-3000:]}')
+    return root.rstrip('/') + '/'
