@@ -7,7 +7,7 @@ import torch.nn.functional as F
 from mmdet3d.registry import MODELS
 from torch import Tensor
 
-from .utils import check_labels, flatten_logits, zero_with_grad
+from .utils import supervised_voxels, zero_with_grad
 
 
 @MODELS.register_module()
@@ -71,23 +71,11 @@ class OccFocalLoss(nn.Module):
             Tensor: Scalar loss; zero (with zero gradients) when every voxel
             is ignored.
         """
-        flat_logits, flat_target = flatten_logits(logits, target,
-                                                  'OccFocalLoss')
-        num_classes = flat_logits.shape[1]
-        if (self.class_weight is not None
-                and len(self.class_weight) != num_classes):
-            raise ValueError(
-                f'OccFocalLoss: expected {num_classes} class weights for '
-                f'logits with {num_classes} classes, got '
-                f'{len(self.class_weight)}.')
-        valid = check_labels(flat_target, num_classes, self.ignore_index,
-                             'OccFocalLoss')
-        if not bool(valid.any()):
+        picked = supervised_voxels(logits, target, self.ignore_index,
+                                   'OccFocalLoss', self.class_weight)
+        if picked is None:
             return zero_with_grad(logits)
-        # Selecting rather than masking keeps ignored voxels out of the
-        # softmax gradient entirely.
-        scores = flat_logits[valid].float()
-        labels = flat_target[valid]
+        scores, labels = picked
         log_p = F.log_softmax(scores, dim=1).gather(1, labels[:, None])[:, 0]
         p = log_p.exp()
         loss = -((1.0 - p)**self.gamma) * log_p

@@ -16,14 +16,14 @@ import torch.nn.functional as F
 from mmdet3d.registry import MODELS
 from torch import Tensor
 
-from .utils import check_labels, flatten_logits, zero_with_grad
+from .utils import supervised_voxels, zero_with_grad
 
 
-def lovasz_softmax_flat(probs: Tensor,
-                        labels: Tensor,
-                        classes: Union[str, Sequence[int]] = 'present',
-                        class_weight: Optional[Sequence[float]] = None
-                        ) -> Optional[Tensor]:
+def lovasz_softmax_flat(
+        probs: Tensor,
+        labels: Tensor,
+        classes: Union[str, Sequence[int]] = 'present',
+        class_weight: Optional[Sequence[float]] = None) -> Optional[Tensor]:
     """Lovasz-softmax loss of supervised voxels, all classes at once.
 
     Implements eq. 12 and Algorithm 1 of Berman et al., "The Lovasz-Softmax
@@ -131,24 +131,20 @@ class OccLovaszLoss(nn.Module):
             Tensor: Scalar loss; zero (with zero gradients) when no voxel
             is supervised.
         """
-        flat_logits, flat_target = flatten_logits(logits, target,
-                                                  'OccLovaszLoss')
-        num_classes = flat_logits.shape[1]
-        if (self.class_weight is not None
-                and len(self.class_weight) != num_classes):
-            raise ValueError(
-                f'OccLovaszLoss: expected {num_classes} class weights, got '
-                f'{len(self.class_weight)}.')
-        if not isinstance(self.classes, str) and any(
-                c < 0 or c >= num_classes for c in self.classes):
+        # Shapes are checked by supervised_voxels; this needs only C.
+        num_classes = logits.shape[1] if logits.dim() >= 2 else None
+        if num_classes is not None and not isinstance(
+                self.classes, str) and any(c < 0 or c >= num_classes
+                                           for c in self.classes):
             raise ValueError(f'OccLovaszLoss: classes {self.classes} out of '
                              f'range for {num_classes} classes.')
-        valid = check_labels(flat_target, num_classes, self.ignore_index,
-                             'OccLovaszLoss')
-        if not bool(valid.any()):
+        picked = supervised_voxels(logits, target, self.ignore_index,
+                                   'OccLovaszLoss', self.class_weight)
+        if picked is None:
             return zero_with_grad(logits)
-        probs = F.softmax(flat_logits[valid].float(), dim=1)
-        loss = lovasz_softmax_flat(probs, flat_target[valid], self.classes,
+        scores, labels = picked
+        probs = F.softmax(scores, dim=1)
+        loss = lovasz_softmax_flat(probs, labels, self.classes,
                                    self.class_weight)
         if loss is None:
             return zero_with_grad(logits)

@@ -5,7 +5,7 @@ import torch.nn.functional as F
 from mmdet3d.registry import MODELS
 from torch import Tensor
 
-from .utils import check_labels, flatten_logits, zero_with_grad
+from .utils import supervised_voxels, zero_with_grad
 
 
 def _neg_log_ratio(numerator: Tensor, denominator: Tensor,
@@ -98,17 +98,16 @@ class SceneClassAffinityLoss(nn.Module):
             is ignored.
         """
         name = f'SceneClassAffinityLoss({self.mode})'
-        flat_logits, flat_target = flatten_logits(logits, target, name)
-        num_classes = flat_logits.shape[1]
-        if not 0 <= self.empty_index < num_classes:
+        # Shapes are checked by supervised_voxels; this needs only C.
+        num_classes = logits.shape[1] if logits.dim() >= 2 else None
+        if num_classes is not None and not 0 <= self.empty_index < num_classes:
             raise ValueError(f'{name}: empty_index {self.empty_index} out of '
                              f'range for {num_classes} classes.')
-        valid = check_labels(flat_target, num_classes, self.ignore_index,
-                             name)
-        if not bool(valid.any()):
+        picked = supervised_voxels(logits, target, self.ignore_index, name)
+        if picked is None:
             return zero_with_grad(logits)
-        probs = F.softmax(flat_logits[valid].float(), dim=1)
-        labels = flat_target[valid]
+        scores, labels = picked
+        probs = F.softmax(scores, dim=1)
         if self.mode == 'geo':
             loss = self._geo(probs, labels)
         else:

@@ -1,5 +1,5 @@
 """Input checks and flattening shared by the occupancy losses."""
-from typing import Tuple
+from typing import Optional, Sequence, Tuple
 
 import torch
 from torch import Tensor
@@ -75,3 +75,42 @@ def zero_with_grad(tensor: Tensor) -> Tensor:
     that produced the logits to receive a gradient.
     """
     return tensor.sum() * 0.0
+
+
+def supervised_voxels(
+    logits: Tensor,
+    target: Tensor,
+    ignore_index: int,
+    loss_name: str,
+    class_weight: Optional[Sequence[float]] = None
+) -> Optional[Tuple[Tensor, Tensor]]:
+    """The float32 logits and labels of the supervised voxels.
+
+    The common prologue of the occupancy losses: shape and dtype checks
+    (:func:`flatten_logits`), the class-weight length, label range
+    (:func:`check_labels`), then selection of the voxels whose label is not
+    ``ignore_index``. Selecting rather than masking keeps ignored voxels out
+    of the softmax gradient entirely.
+
+    Args:
+        logits (Tensor): Class scores. Shape (B, C, X, Y, Z) or (N, C).
+        target (Tensor): Integer labels. Shape (B, X, Y, Z) or (N,).
+        ignore_index (int): Label of voxels without supervision.
+        loss_name (str): Name of the calling loss, used in error messages.
+        class_weight (Sequence[float], optional): Checked to have one
+            weight per class. Defaults to None.
+
+    Returns:
+        tuple[Tensor, Tensor] | None: Logits Shape (M, C) in float32 and
+        labels Shape (M,) of the M supervised voxels, or None when M = 0.
+    """
+    flat_logits, flat_target = flatten_logits(logits, target, loss_name)
+    num_classes = flat_logits.shape[1]
+    if class_weight is not None and len(class_weight) != num_classes:
+        raise ValueError(
+            f'{loss_name}: expected {num_classes} class weights for logits '
+            f'with {num_classes} classes, got {len(class_weight)}.')
+    valid = check_labels(flat_target, num_classes, ignore_index, loss_name)
+    if not bool(valid.any()):
+        return None
+    return flat_logits[valid].float(), flat_target[valid]
