@@ -14,9 +14,10 @@ held-out ones, and draw their learning curves.
    every ``--val-interval`` iterations;
 3. evaluates the last checkpoint with ``tools/test.py --show-dir`` (a few
    pictures of prediction against ground truth per run);
-4. writes ``results.md`` / ``results.json`` (IoU, mIoU, per-class IoU,
-   train time, iterations) and ``runs/<name>/curve.png`` (validation IoU /
-   mIoU and training loss against iterations).
+4. writes ``runs/<name>/curve.png`` (validation IoU / mIoU and training
+   loss against iterations) and ``results.md`` / ``results.json`` (IoU,
+   mIoU, per-class IoU, train time, iterations) of every finished run in
+   ``--out``.
 
 It resumes: a killed run continues from its last checkpoint, and a finished
 run (``runs/<name>/result.json`` with the same settings) is reused. Nothing
@@ -35,7 +36,7 @@ import sys
 import time
 from typing import Dict, List, Optional
 
-from occ_runs import (ROOT, data_options, format_table, last_metrics,
+from occ_runs import (ROOT, data_options, format_table, last_metrics, pct,
                       prepare_world, read_json_lines, run, tool)
 
 #: Named runs: name -> (config, extra --cfg-options).
@@ -182,7 +183,11 @@ def set_iteration_budget(cfg, max_iters: Optional[int], val_interval: int,
 def _train_clock_hook(max_seconds: Optional[float], path: str):
     """A hook that measures training time (validation excluded), stores it
     in every checkpoint (so a resumed run keeps counting), writes it to
-    ``path`` and ends training after ``max_seconds``."""
+    ``path`` and ends training after ``max_seconds``.
+
+    Besides wall time it sums the process's CPU time: on a machine shared
+    with other jobs the wall time grows with the load, the CPU time (all
+    threads) much less, so it tells what the run would take alone."""
     from mmengine.hooks import Hook
 
     class TrainClock(Hook):
@@ -190,24 +195,27 @@ def _train_clock_hook(max_seconds: Optional[float], path: str):
 
         def __init__(self):
             self.seconds = 0.0
+            self.cpu_seconds = 0.0
             self.mark = None
             self.stopped_by_time = False
 
         def _write(self, runner):
             with open(path, 'w') as f:
                 json.dump(dict(train_seconds=self.seconds,
+                               cpu_seconds=self.cpu_seconds,
                                iterations=runner.iter,
                                max_iters=runner.train_loop.max_iters,
                                stopped_by_time=self.stopped_by_time), f)
 
         def before_train_iter(self, runner, batch_idx, data_batch=None):
             if self.mark is None:
-                self.mark = time.perf_counter()
+                self.mark = (time.perf_counter(), time.process_time())
 
         def after_train_iter(self, runner, batch_idx, data_batch=None,
                              outputs=None):
-            now = time.perf_counter()
-            self.seconds += now - self.mark
+            now = (time.perf_counter(), time.process_time())
+            self.seconds += now[0] - self.mark[0]
+            self.cpu_seconds += now[1] - self.mark[1]
             self.mark = now
             loop = runner.train_loop
             if (max_seconds is not None and self.seconds >= max_seconds
@@ -225,12 +233,14 @@ def _train_clock_hook(max_seconds: Optional[float], path: str):
 
         def before_save_checkpoint(self, runner, checkpoint):
             checkpoint['meta']['train_seconds'] = self.seconds
+            checkpoint['meta']['train_cpu_seconds'] = self.cpu_seconds
             checkpoint['meta']['stopped_by_time'] = self.stopped_by_time
             self._write(runner)
 
         def after_load_checkpoint(self, runner, checkpoint):
             meta = checkpoint.get('meta', {})
             self.seconds = float(meta.get('train_seconds', 0.0))
+            self.cpu_seconds = float(meta.get('train_cpu_seconds', 0.0))
             self.stopped_by_time = bool(meta.get('stopped_by_time', False))
 
         def after_train(self, runner):
@@ -304,7 +314,7 @@ def read_curves(work_dir: str) -> Dict[str, List]:
 
 def plot_curves(curves: Dict[str, List], title: str, path: str) -> None:
     """Learning-curve PNG: validation IoU / mIoU (left axis, %) and
-    training loss (right axis, log scale) against iterations."""
+    training loss (right axis) against iterations."""
     import matplotlib
     matplotlib.use('Agg')
     from matplotlib import pyplot as plt
@@ -323,7 +333,8 @@ def plot_curves(curves: Dict[str, List], title: str, path: str) -> None:
         right.plot([s for s, _ in curves['loss']],
                    [v for _, v in curves['loss']], color='grey', lw=1,
                    label='train loss')
-        right.set_yscale('log')
+        right.set_ylim(bottom=0)
+    ax.set_xlim(left=0)
     right.set_ylabel('training loss')
     lines = ax.get_legend_handles_labels()
     more = right.get_legend_handles_labels()
@@ -414,6 +425,7 @@ def bench_run(name: str, config: str, options: List[str], args,
                train_samples=info['train_samples'],
                epoch_length=info['epoch_length'],
                train_s=clock['train_seconds'],
+               train_cpu_s=clock.get('cpu_seconds', math.nan),
                iterations=clock['iterations'],
                stopped_by_time=clock['stopped_by_time'], metrics=metrics,
                curves=curves, curve_png=curve_png,
@@ -421,6 +433,15 @@ def bench_run(name: str, config: str, options: List[str], args,
     with open(osp.join(run_dir, RESULT), 'w') as f:
         json.dump(row, f, indent=1)
     return row
+
+
+def _best_val(row: dict) -> str:
+    """Best validation mIoU of a run and the iteration it was reached."""
+    val = [(m.get('occ/mIoU', math.nan), s) for s, m in row['curves']['val']]
+    if not val:
+        return 'n/a'
+    best, step = max(val)
+    return f'{pct(best)} ({step})'
 
 
 def main(argv=None):
@@ -437,32 +458,33 @@ def main(argv=None):
                   args.image_size, args.val_scenes, args.seed)
     runs = [(name, *RUNS[name]) for name in args.runs]
     runs += [(name, config, []) for name, config in args.config]
-    rows = []
     for name, config, options in runs:
-        rows.append(
-            bench_run(name + args.suffix, config,
-                      list(options) + list(args.cfg_options), args,
-                      data_root, out, log_path))
+        bench_run(name + args.suffix, config,
+                  list(options) + list(args.cfg_options), args, data_root,
+                  out, log_path)
+    # The table holds every finished run of OUT, also those of earlier
+    # invocations (other budgets or options: see each run's settings).
+    rows = [_load_json(path) for path in sorted(
+        glob.glob(osp.join(out, 'runs', '*', RESULT)))]
     table = format_table(rows, [
+        ('train CPU time (all threads)',
+         lambda r: f'{r.get("train_cpu_s", math.nan) / 60:.1f} min'),
         ('iterations', lambda r: str(r['iterations']) +
          (' (time limit)' if r['stopped_by_time'] else '')),
         ('epochs', lambda r: f'{r["iterations"] / r["epoch_length"]:.1f}'),
         ('params', lambda r: f'{r["params"] / 1e6:.2f} M'),
-        ('best val mIoU', lambda r: max(
-            [m.get('occ/mIoU', 0.0) for _, m in r['curves']['val']],
-            default=math.nan).__format__('.2f')),
+        ('best val mIoU (at it)', _best_val),
     ])
     header = (f'Held-out synthetic scenes ({args.val_scenes} of '
               f'{args.scenes}, {args.samples} key frames each, '
               f'{args.image_size[0]}x{args.image_size[1]} images); '
               f'IoU in %.\n\n')
-    name = 'results' + args.suffix
-    with open(osp.join(out, f'{name}.md'), 'w') as f:
+    with open(osp.join(out, 'results.md'), 'w') as f:
         f.write(header + table + '\n')
-    with open(osp.join(out, f'{name}.json'), 'w') as f:
+    with open(osp.join(out, 'results.json'), 'w') as f:
         json.dump(rows, f, indent=1)
     print('\n' + header + table)
-    print(f'\nCurves: {out}/runs/*/curve.png; table: {out}/{name}.md')
+    print(f'\nCurves: {out}/runs/*/curve.png; table: {out}/results.md')
     return rows
 
 
