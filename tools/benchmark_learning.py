@@ -181,9 +181,10 @@ def set_iteration_budget(cfg, max_iters: Optional[int], val_interval: int,
 
 
 def _train_clock_hook(max_seconds: Optional[float], path: str):
-    """A hook that measures training time (validation excluded), stores it
-    in every checkpoint (so a resumed run keeps counting), writes it to
-    ``path`` and ends training after ``max_seconds``.
+    """A hook that validates the untrained model (iteration 0 of the
+    curve), measures training time (validation excluded), stores it in every
+    checkpoint (so a resumed run keeps counting), writes it to ``path`` and
+    ends training after ``max_seconds``.
 
     Besides wall time it sums the process's CPU time: on a machine shared
     with other jobs the wall time grows with the load, the CPU time (all
@@ -206,6 +207,12 @@ def _train_clock_hook(max_seconds: Optional[float], path: str):
                                iterations=runner.iter,
                                max_iters=runner.train_loop.max_iters,
                                stopped_by_time=self.stopped_by_time), f)
+
+        def before_train(self, runner):
+            # The untrained model's point of the curve: the weights are
+            # initialised by now, and evaluating draws no training RNG.
+            if runner.iter == 0 and runner.val_loop is not None:
+                runner.val_loop.run()
 
         def before_train_iter(self, runner, batch_idx, data_batch=None):
             if self.mark is None:

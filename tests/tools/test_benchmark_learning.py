@@ -96,7 +96,8 @@ def _train(spec):
 def test_resume_continues_curves_and_clock(tmp_path):
     """3 iterations, then the same work dir with a budget of 6 resumes at
     iteration 3: one loss point per iteration (log interval 1), validation
-    at 3 and 6, and the training time of both segments adds up."""
+    of the untrained model (0), at 3 and 6 (not again at 3 on resuming),
+    and the training time of both segments adds up."""
     work = str(tmp_path / 'train')
     first = _train(_spec(work, 3))
     assert (first['iterations'], first['stopped_by_time']) == (3, False)
@@ -105,7 +106,7 @@ def test_resume_continues_curves_and_clock(tmp_path):
     assert second['train_seconds'] > first['train_seconds'] > 0
     curves = _tool().read_curves(work)
     assert [s for s, _ in curves['loss']] == [1, 2, 3, 4, 5, 6]
-    assert [s for s, _ in curves['val']] == [3, 6]
+    assert [s for s, _ in curves['val']] == [0, 3, 6]
     assert 'occ/mIoU' in curves['val'][-1][1]
 
 
@@ -117,7 +118,7 @@ def test_time_limit_stops_and_validates(tmp_path):
     clock = _train(_spec(work, 6, max_minutes=1e-4))
     assert (clock['iterations'], clock['stopped_by_time']) == (1, True)
     assert osp.isfile(osp.join(work, 'iter_1.pth'))
-    assert [s for s, _ in _tool().read_curves(work)['val']] == [1]
+    assert [s for s, _ in _tool().read_curves(work)['val']] == [0, 1]
 
 
 @pytest.mark.slow
@@ -132,7 +133,7 @@ def test_bench_run_writes_row_and_reuses_it(tmp_path, capsys):
     row = tool.bench_run('toy', CONFIG, [], args, None, str(tmp_path), log)
     assert row['iterations'] == 4 and row['epoch_length'] == 4
     assert row['labels'] == 'SurroundOcc'
-    assert [s for s, _ in row['curves']['val']] == [2, 4]
+    assert [s for s, _ in row['curves']['val']] == [0, 2, 4]
     # The test of the last checkpoint and the last validation agree.
     assert row['metrics']['occ/mIoU'] == pytest.approx(
         row['curves']['val'][-1][1]['occ/mIoU'], abs=1e-3)
