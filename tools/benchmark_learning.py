@@ -32,11 +32,10 @@ import json
 import math
 import os
 import os.path as osp
-import sys
 import time
 from typing import Dict, List, Optional
 
-from occ_runs import (ROOT, data_options, format_table, last_metrics, pct,
+from occ_runs import (data_options, format_table, last_metrics, pct,
                       prepare_world, read_json_lines, run, tool)
 
 #: Named runs: name -> (config, extra --cfg-options).
@@ -258,8 +257,7 @@ def _train_clock_hook(max_seconds: Optional[float], path: str):
 
 def train_one(spec: dict) -> None:
     """Train one run (in the child process); see :func:`bench_run`."""
-    sys.path.insert(0, osp.join(ROOT, 'tools'))
-    import train as train_tool
+    import train as train_tool  # tools/ is on sys.path: this is a script
     from mmengine.registry import DATASETS, init_default_scope
     from mmengine.runner import Runner
     work_dir = spec['work_dir']
