@@ -252,7 +252,8 @@ def main(argv=None):
                                                args.pip.split()):
                 print(f'Python {python}: {check}: '
                       f'{"ok" if passed else "FAILED"}')
-                print('    ' + '\n    '.join(tail))
+                for line in tail:
+                    print('    ' + line)
                 failed = failed or not passed
     return 1 if failed else 0
 
