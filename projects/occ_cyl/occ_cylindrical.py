@@ -10,11 +10,11 @@ from mmdet3d.structures import Det3DDataSample
 from mmdet3d.utils import ConfigType, OptConfigType, OptMultiConfig
 from torch import Tensor
 
+from projects.occ_common.geometry.depth import depth_bin_values
 from projects.occ_common.models.layers import (camera_parameter_vector,
                                                cartesian_to_cylindrical,
                                                create_frustum,
                                                cylindrical_position_embedding,
-                                               depth_bin_values,
                                                frustum_to_lidar,
                                                lidar2img_matrix)
 

@@ -10,8 +10,8 @@ from mmdet3d.utils import ConfigType, OptMultiConfig
 from mmengine.model import BaseModule
 from torch import Tensor, nn
 
-from projects.occ_common.models.layers import (cartesian_to_cylindrical,
-                                               project_points)
+from projects.occ_common.geometry.depth import project_points
+from projects.occ_common.models.layers import cartesian_to_cylindrical
 
 
 def _mlp(channels: Sequence[int], norm_cfg: ConfigType) -> nn.Sequential:

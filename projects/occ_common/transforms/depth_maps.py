@@ -2,65 +2,35 @@
 
 Both project the points with the current ``lidar2img`` (which includes the
 image augmentation, see :mod:`.image_aug`), so the maps are aligned with
-the augmented images. Pixel ``i`` covers ``[i, i + 1)``: a point at image
-coordinate ``u`` falls in column ``floor(u)``. Where several points share a
-pixel, the nearest one (smallest depth) wins, as a camera would see it.
+the augmented images. The projection, the pixel convention and the nearest
+point per pixel are those of :mod:`projects.occ_common.geometry.depth`,
+which the models' depth maps and depth bins use too.
 """
 from typing import Optional, Tuple
 
 import numpy as np
+import torch
 from mmcv.transforms import BaseTransform
 from mmdet3d.registry import TRANSFORMS
 
 from ..datasets.occ_formats import IGNORE_INDEX
+from ..geometry.depth import project_nearest
 from .frames import points_xyz
 
 
-def project_nearest(xyz: np.ndarray,
-                    lidar2img: np.ndarray,
-                    img_shape: Tuple[int, int],
-                    min_depth: float = 1e-3,
-                    max_depth: Optional[float] = None) -> tuple:
-    """Project points into every view and keep the nearest per pixel.
-
-    Args:
-        xyz (np.ndarray): Points in the working frame. Shape (P, 3).
-        lidar2img (np.ndarray): Shape (N, 4, 4).
-        img_shape (tuple[int, int]): (H, W).
-        min_depth (float): Points nearer than this are dropped (behind or
-            on the camera). Defaults to 1e-3.
-        max_depth (float, optional): Points farther are dropped.
+def _project_nearest(xyz: np.ndarray, lidar2img: np.ndarray,
+                     img_shape: Tuple[int, int], min_depth: float,
+                     max_depth: Optional[float] = None) -> tuple:
+    """:func:`~projects.occ_common.geometry.depth.project_nearest` on arrays.
 
     Returns:
-        tuple[np.ndarray, ...]: ``view``, ``row``, ``col`` (int64),
-        ``depth`` (float64) and ``index`` (int64, into ``xyz``) of the
-        winning point of each hit pixel. Shapes (K,).
+        tuple[np.ndarray, ...]: ``view``, ``row``, ``col``, ``depth``
+        (float64) and ``index`` of the winning point of each hit pixel.
     """
-    height, width = img_shape
-    num_views = len(lidar2img)
-    if len(xyz) == 0 or num_views == 0:
-        empty = np.zeros(0, np.int64)
-        return empty, empty, empty, np.zeros(0), empty
-    # (N, 3, 3) @ (3, P) + (N, 3, 1): image-plane coordinates times depth.
-    cam = lidar2img[:, :3, :3] @ xyz.T + lidar2img[:, :3, 3:]
-    depth = cam[:, 2]
-    keep = depth > min_depth
-    if max_depth is not None:
-        keep &= depth < max_depth
-    safe = np.where(keep, depth, 1.0)
-    col = np.floor(cam[:, 0] / safe)
-    row = np.floor(cam[:, 1] / safe)
-    keep &= (col >= 0) & (col < width) & (row >= 0) & (row < height)
-    view, index = np.nonzero(keep)
-    row = row[view, index].astype(np.int64)
-    col = col[view, index].astype(np.int64)
-    depth = depth[view, index]
-    pixel = (view * height + row) * width + col
-    order = np.lexsort((depth, pixel))  # by pixel, then nearest first
-    first = np.ones(len(order), dtype=bool)
-    first[1:] = pixel[order][1:] != pixel[order][:-1]
-    win = order[first]
-    return view[win], row[win], col[win], depth[win], index[win]
+    out = project_nearest(
+        torch.from_numpy(xyz), torch.from_numpy(np.asarray(lidar2img)),
+        img_shape, min_depth, max_depth)
+    return tuple(t.numpy() for t in out)
 
 
 def _key_frame(results: dict) -> np.ndarray:
@@ -127,7 +97,7 @@ class PointsToDepthMaps(BaseTransform):
         lidar2img = np.asarray(results['lidar2img'])
         xyz = points_xyz(results['points'],
                          _key_frame(results) if self.key_frame_only else None)
-        view, row, col, depth, _ = project_nearest(
+        view, row, col, depth, _ = _project_nearest(
             xyz, lidar2img, (height, width), self.min_depth, self.max_depth)
         out = np.zeros((len(lidar2img), height, width), np.float32)
         out[view, row, col] = depth
@@ -194,9 +164,9 @@ class PointsToSemanticMaps(BaseTransform):
                 f'{results.get("token", "?")}')
         keep = labels != self.ignore_index
         xyz = points_xyz(results['points'], keep)
-        view, row, col, _, index = project_nearest(xyz, lidar2img,
-                                                   (height, width),
-                                                   self.min_depth)
+        view, row, col, _, index = _project_nearest(xyz, lidar2img,
+                                                    (height, width),
+                                                    self.min_depth)
         out = np.full((len(lidar2img), height, width), self.ignore_index,
                       np.uint8)
         out[view, row, col] = labels[keep][index]

@@ -12,33 +12,18 @@ Conventions (those of mmdet3d 1.x ``lidar2img``):
   the augmented pixel and ``d`` the depth along the optical axis. Lifting a
   pixel at depth ``d`` back to 3D inverts this same matrix, so projection and
   lifting can never disagree.
-* Depth bins follow :class:`DepthBCELoss` (BEVDepth): ``(min, max, step)``
-  gives ``D = round((max - min) / step)`` bins, bin ``k`` covering
-  ``[min + k * step, min + (k + 1) * step)`` and lifted at its near edge
-  ``min + k * step``. OccCylindrical's 50 bins "from 1 m to 50 m" at
-  d = 1 m are therefore ``(1, 51, 1)``.
+* Depth bins and point projection are those of
+  :mod:`projects.occ_common.geometry.depth` (BEVDepth's bins, lifted at
+  their near edge ``min + k * step``), shared with the depth loss and the
+  depth-map transforms.
 """
-from typing import Sequence, Tuple
+from typing import Sequence
 
 import torch
 from torch import Tensor
 
-from ..losses.depth_bce_loss import num_depth_bins
+from ...geometry.depth import depth_bin_values
 from .cylindrical_coords import cartesian_to_cylindrical
-
-
-def depth_bin_values(depth_bound: Sequence[float]) -> Tensor:
-    """Depth of every bin, ``min + k * step``.
-
-    Args:
-        depth_bound (Sequence[float]): ``(min, max, step)`` in metres.
-
-    Returns:
-        Tensor: Depths in metres. Shape (D,).
-    """
-    num = num_depth_bins(depth_bound)
-    d_min, step = float(depth_bound[0]), float(depth_bound[2])
-    return d_min + step * torch.arange(num, dtype=torch.float32)
 
 
 def create_frustum(img_shape: Sequence[int], feat_shape: Sequence[int],
@@ -108,30 +93,6 @@ def frustum_to_lidar(frustum: Tensor, lidar2img: Tensor) -> Tensor:
     img2lidar = torch.linalg.inv(lidar2img.double()).to(lidar2img.dtype)
     pts = torch.einsum('bnij,dhwj->bndhwi', img2lidar, homo)
     return pts[..., :3]
-
-
-def project_points(points: Tensor,
-                   lidar2img: Tensor,
-                   eps: float = 1e-5) -> Tuple[Tensor, Tensor]:
-    """Project LiDAR-frame points into every camera.
-
-    Args:
-        points (Tensor): Points. Shape (P, 3).
-        lidar2img (Tensor): Full projections. Shape (N, 4, 4).
-        eps (float): Smallest depth counted as in front of the camera.
-            Defaults to 1e-5.
-
-    Returns:
-        tuple[Tensor, Tensor]: Augmented pixel ``(u, v)``, shape (N, P, 2)
-        (undefined where the depth is not positive), and depth, shape (N, P).
-    """
-    if points.dim() != 2 or points.shape[1] != 3:
-        raise ValueError(f'points must be (P, 3), got {tuple(points.shape)}')
-    homo = torch.cat([points, points.new_ones(points.shape[0], 1)], dim=1)
-    proj = torch.einsum('nij,pj->npi', lidar2img.to(points), homo)
-    depth = proj[..., 2]
-    uv = proj[..., :2] / depth.clamp(min=eps).unsqueeze(-1)
-    return uv, depth
 
 
 def cylindrical_position_embedding(points: Tensor,

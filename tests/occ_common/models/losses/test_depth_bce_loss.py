@@ -4,8 +4,7 @@ import math
 import pytest
 import torch
 
-from projects.occ_common.models.losses import (DepthBCELoss, depth_to_bins,
-                                               patch_min_depth)
+from projects.occ_common.models.losses import DepthBCELoss
 
 BOUND = (1.0, 5.0, 1.0)  # D = 4 bins: [1, 2) [2, 3) [3, 4) [4, 5)
 
@@ -20,27 +19,6 @@ def _depth_map():
     """
     return torch.tensor([[[0.0, 3.5, 0.0, 0.0], [0.0, 2.2, 0.0, 0.0],
                           [7.0, 6.0, 1.0, 4.9], [0.0, 0.0, 3.0, 0.0]]])
-
-
-def test_patch_min_depth_and_bins():
-    """Nearest depth per patch (0 = none) and one-hot bins in (h, w)
-    row-major order; only the first and last pixel have a target."""
-    nearest = patch_min_depth(_depth_map(), 2)
-    assert torch.allclose(nearest, torch.tensor([[[2.2, 0.0], [6.0, 1.0]]]))
-    onehot, valid = depth_to_bins(_depth_map(), 2, BOUND)
-    assert onehot.shape == (4, 4)
-    assert valid.tolist() == [True, False, False, True]
-    assert onehot.tolist() == [[0, 1, 0, 0], [0, 0, 0, 0], [0, 0, 0, 0],
-                               [1, 0, 0, 0]]
-
-
-def test_bin_edges():
-    """floor((d - 1) / 1): 0.99 -> -1 dropped, 1.0 -> 0, 4.99 -> 3,
-    5.0 (= dmax) -> 4 dropped."""
-    depth = torch.tensor([[[0.99, 1.0, 4.99, 5.0]]])
-    onehot, valid = depth_to_bins(depth, 1, BOUND)
-    assert valid.tolist() == [False, True, True, False]
-    assert onehot.argmax(1)[valid].tolist() == [0, 3]
 
 
 def test_depth_loss_hand_computed():
@@ -85,8 +63,6 @@ def test_default_bins_and_bad_inputs():
         loss(torch.zeros(1, 3, 2, 2), _depth_map())
     with pytest.raises(ValueError, match='does not match'):
         loss(torch.zeros(1, 4, 1, 2), _depth_map())
-    with pytest.raises(ValueError, match='multiple of downsample'):
-        patch_min_depth(torch.zeros(1, 5, 4), 2)
     with pytest.raises(ValueError, match='dmin < dmax'):
         DepthBCELoss(depth_bound=(5.0, 1.0, 1.0))
 
