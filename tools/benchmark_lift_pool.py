@@ -90,9 +90,9 @@ def _paper_geometry(cfg, img_scale=1.0):
     """nuScenes-like 6-camera ring at the config's image size."""
     from mmdet3d.structures import Det3DDataSample
     img_h, img_w = (int(round(s * img_scale)) for s in cfg.img_size)
-    div = cfg.pad_divisor
+    div = cfg.model.data_preprocessor.pad_size_divisor
     pad_h, pad_w = (math.ceil(s / div) * div for s in (img_h, img_w))
-    num_cams = cfg.num_cams
+    num_cams = len(cfg.cam_names)
     focal = 1266.0 * img_w / 1600.0
     cam2img = np.tile(np.eye(4, dtype=np.float32), (num_cams, 1, 1))
     cam2img[:, 0, 0] = cam2img[:, 1, 1] = focal
@@ -120,31 +120,38 @@ def measure_lift(config, mode, threads):
     torch.set_num_threads(threads)
     cfg = _build_cfg(config)
     from mmdet3d.registry import MODELS
-    fusion_cfg = cfg.model.tpv_fusion.copy()
-    fusion_cfg.update(fused_lift=mode.startswith('fused'), with_lidar=False)
-    fusion = MODELS.build(fusion_cfg)
-    sample, (pad_h, pad_w) = _paper_geometry(cfg)
-    stride = cfg.img_stride
-    feat_h, feat_w = pad_h // stride, pad_w // stride
-    # The lift's inputs need the plugin's geometry helpers and the lift
-    # itself; the config's custom_imports has already imported them.
+
+    # The lift's inputs need the plugin's cylinder and geometry helpers and
+    # the lift itself; the config's custom_imports has already imported
+    # them.
     from projects.occ_common.models.layers import (cartesian_to_cylindrical,
                                                    create_frustum,
                                                    frustum_to_lidar)
+    from projects.occ_cyl.cylindrical import CylinderGrid
     from projects.occ_cyl.lift_pool import lift_max_pool
+    model_cfg = cfg.model
+    # The cylinder OccCylindrical builds for its occupancy range.
+    cylinder = CylinderGrid.covering(model_cfg.point_cloud_range,
+                                     model_cfg.cylinder_shape)
+    fusion = MODELS.build(
+        dict(model_cfg.tpv_fusion, fused_lift=mode.startswith('fused'),
+             with_lidar=False, cylinder=cylinder))
+    sample, (pad_h, pad_w) = _paper_geometry(cfg)
+    stride = model_cfg.img_encoder.out_stride
+    feat_h, feat_w = pad_h // stride, pad_w // stride
+    context_channels = model_cfg.depth_net.context_channels
     frustum = create_frustum((pad_h, pad_w), (feat_h, feat_w),
-                             cfg.depth_bound)
+                             model_cfg.depth_bound)
     l2i = torch.as_tensor(sample.metainfo['lidar2img'])[None]
     cam_points = frustum_to_lidar(frustum, l2i)
-    voxel_idx = fusion.grid.flat_index(
-        cartesian_to_cylindrical(cam_points))[0]
+    voxel_idx = cylinder.flat_index(cartesian_to_cylindrical(cam_points))[0]
     del cam_points
     num_bins = frustum.shape[0]
     gen = torch.Generator().manual_seed(0)
     num_imgs = l2i.shape[1]
     depth = torch.randn(num_imgs, num_bins, feat_h, feat_w,
                         generator=gen).softmax(1)
-    context = torch.randn(num_imgs, cfg.context_channels, feat_h, feat_w,
+    context = torch.randn(num_imgs, context_channels, feat_h, feat_w,
                           generator=gen)
     backward = mode.endswith('backward')
     depth.requires_grad_(backward)
@@ -157,7 +164,7 @@ def measure_lift(config, mode, threads):
         depth,
         context,
         voxel_idx,
-        fusion.grid.num_voxels,
+        cylinder.num_voxels,
         fused=fusion.fused_lift,
         chunk_size=fusion.lift_chunk_size)
     if backward:
@@ -169,12 +176,12 @@ def measure_lift(config, mode, threads):
     return dict(
         mode=mode,
         points=points,
-        channels=cfg.context_channels,
-        voxels=fusion.grid.num_voxels,
+        channels=context_channels,
+        voxels=cylinder.num_voxels,
         occupied_voxels=int((vol.detach().abs().sum(1) > 0).sum()),
         chunk_size=fusion.lift_chunk_size,
         peak_extra_mib=(peak - base) / 1024,
-        naive_feature_tensor_mib=points * cfg.context_channels * 4 / 2**20,
+        naive_feature_tensor_mib=points * context_channels * 4 / 2**20,
         output_mib=vol.numel() * 4 / 2**20,
         seconds=seconds,
         peak_reset=reset)
@@ -188,7 +195,7 @@ def measure_model(config, img_scale, repeat, num_points, threads):
     model = MODELS.build(cfg.model).eval()
     sample, (pad_h, pad_w) = _paper_geometry(cfg, img_scale)
     gen = torch.Generator().manual_seed(0)
-    imgs = torch.randn(1, cfg.num_cams, 3, pad_h, pad_w, generator=gen)
+    imgs = torch.randn(1, len(cfg.cam_names), 3, pad_h, pad_w, generator=gen)
     # 10 sweeps: uniform in the 100 m box, ground-heavy heights.
     xyz = (torch.rand(num_points, 3, generator=gen) - 0.5) * torch.tensor(
         [100.0, 100.0, 8.0]) + torch.tensor([0.0, 0.0, -1.0])

@@ -1,158 +1,89 @@
-"""Every OccCylindrical config builds; the tiny one trains and tests."""
+"""The OccCylindrical configs are deltas that state each fact once; the
+tiny one trains and tests. (test_all_configs.py builds every config and
+compares its model with the committed fingerprint.)"""
 import glob
-import math
 import os.path as osp
-import re
 
 import pytest
 from mmdet3d.registry import MODELS
 from mmengine.config import Config
 from mmengine.registry import init_default_scope
 
+from projects.occ_common.testing.config_delta import (coupled_value_mismatches,
+                                                      model_delta)
 from projects.occ_common.testing.tool_logs import (last_test_metrics,
                                                    make_converted_world,
                                                    mean_of_class_ious,
                                                    run_tool, train_losses)
-from projects.occ_cyl import OccCylindrical
-from projects.occ_cyl.cylindrical import CylinderGrid
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIG_DIR = osp.join(ROOT, 'configs', 'occ_cyl')
+MODEL_BASE = osp.join(CONFIG_DIR, '_base_', 'occcyl_r50-swint.py')
 MAIN = sorted(glob.glob(osp.join(CONFIG_DIR, '*.py')))
 ABLATIONS = sorted(glob.glob(osp.join(CONFIG_DIR, 'ablations', '*.py')))
 PAPER = osp.join(CONFIG_DIR, 'occcyl_r50-swint_3xb1-24e_surroundocc-nus.py')
 OCC3D = osp.join(CONFIG_DIR, 'occcyl_r50-swint_3xb1-24e_occ3d-nus.py')
 TINY = osp.join(CONFIG_DIR, 'occcyl_tiny_1xb1-6e_surroundocc-nus-synthetic.py')
 
+#: What each config changes in the model of the config it builds on.
+COUPLED = {'point_cloud_range', 'voxel_size', 'num_classes', 'empty_index'}
+DELTAS = {
+    # Dataset configs on the model base: the coupled values only.
+    PAPER: (MODEL_BASE, COUPLED),
+    OCC3D: (MODEL_BASE, COUPLED | {'loss_mask_key'}),
+    # Table V (3), VI (2) and VII (3): one knob each.
+    'occcyl-nodepthsup': (PAPER, {'loss_depth'}),
+    'occcyl-nodepthfeat': (PAPER, {'depth_net.with_depth_feature'}),
+    'occcyl-nopos': (PAPER, {'depth_net.position_channels'}),
+    'occcyl-d2m': (PAPER, {'depth_bound'}),
+    'occcyl-d10m': (PAPER, {'depth_bound'}),
+    'occcyl-m1': (PAPER, {'tpv_fusion.num_groups'}),
+    'occcyl-m2': (PAPER, {'tpv_fusion.num_groups'}),
+    'occcyl-m4': (PAPER, {'tpv_fusion.num_groups'}),
+}
 
-def _flatten(obj, prefix=''):
-    """{'a.b[0].c': value} of a nested config."""
-    if isinstance(obj, dict):
-        out = {}
-        for key, value in obj.items():
-            out.update(_flatten(value, f'{prefix}.{key}' if prefix else key))
-        return out
-    if isinstance(obj, (list, tuple)) and any(
-            isinstance(v, (dict, list, tuple)) for v in obj):
-        out = {}
-        for i, value in enumerate(obj):
-            out.update(_flatten(value, f'{prefix}[{i}]'))
-        return out
-    return {prefix: obj}
 
-
-def _model_diff(path_a, path_b):
-    a = _flatten(Config.fromfile(path_a).to_dict()['model'])
-    b = _flatten(Config.fromfile(path_b).to_dict()['model'])
-    return {k for k in a.keys() | b.keys() if a.get(k) != b.get(k)}
+def _name(path):
+    return osp.basename(path).split('_')[0] if '/ablations/' in path else path
 
 
 def test_config_inventory():
     """The paper's config, its Occ3D variant, the tiny synthetic config and
     the deltas of Tables V (3 files), VI (2) and VII (3)."""
     assert set(MAIN) == {PAPER, OCC3D, TINY}
-    names = {osp.basename(p).split('_')[0] for p in ABLATIONS}
-    assert names == {
-        'occcyl-nodepthsup', 'occcyl-nodepthfeat', 'occcyl-nopos',
-        'occcyl-d2m', 'occcyl-d10m', 'occcyl-m1', 'occcyl-m2', 'occcyl-m4'
-    }
+    assert {_name(p) for p in ABLATIONS} | {PAPER, OCC3D} == set(DELTAS)
 
 
 @pytest.mark.parametrize(
-    'path', MAIN + ABLATIONS, ids=lambda p: osp.basename(p)[:-3])
-def test_coupled_values_reach_every_module(path):
-    """Imports, grid, cylinder, depth bins and classes agree everywhere, and
-    the cylinder covers every voxel of the output grid."""
+    'path', [PAPER, OCC3D] + ABLATIONS, ids=lambda p: osp.basename(p)[:-3])
+def test_each_delta_changes_only_its_documented_keys(path):
+    """Compared with the config it builds on, a config changes exactly the
+    model keys listed in DELTAS."""
+    parent, keys = DELTAS[_name(path)]
+    assert model_delta(parent, path) == keys
+
+
+@pytest.mark.parametrize('path', MAIN, ids=lambda p: osp.basename(p)[:-3])
+def test_coupled_values_come_from_the_dataset_base(path):
+    """The model's grid, classes and empty label are the dataset base's
+    (Occ3D: 'free' = 17 and the camera-mask loss, as the metric), the
+    config needs both packages, and the images are the paper's size."""
     cfg = Config.fromfile(path)
-    assert cfg.custom_imports == dict(
-        imports=['projects.occ_common', 'projects.occ_cyl'],
-        allow_failed_imports=False)
-    model = cfg.model
-    pcr = cfg.point_cloud_range
-    grid = [round((pcr[i + 3] - pcr[i]) / cfg.voxel_size[i]) for i in range(3)]
-    head = model.occ_head
-    assert [list(s) for s in head.scale_shapes
-            ] == [[g // 2**lvl for g in grid] for lvl in range(4)]
-    assert head.num_classes == len(cfg.class_names)
-    assert head.pc_range == pcr
-    assert head.cyl_range == model.tpv_fusion.cyl_range
-    assert head.grid_shape == model.tpv_fusion.grid_shape
-    assert CylinderGrid(head.grid_shape, head.cyl_range).covers_box(pcr)
-    # The radius reaches the corners at (max |x|^2 + max |y|^2)^0.5.
-    assert head.cyl_range[3] >= math.hypot(pcr[3], pcr[4])
-    bound = model.depth_bound
-    num_bins = round((bound[1] - bound[0]) / bound[2])
-    assert model.depth_net.num_depth_bins == num_bins
-    assert model.depth_net.position_channels in (0, 3 * num_bins)
-    if model.loss_depth is not None:
-        assert model.loss_depth.depth_bound == bound
-        assert model.loss_depth.downsample == cfg.img_stride
-    for size in model.tpv_fusion.grid_shape:
-        assert size % model.tpv_fusion.num_groups == 0
-    assert model.tpv_encoder.backbone.in_channels == \
-        model.tpv_fusion.plane_channels
-    assert cfg.val_evaluator.type == 'OccupancyMetric'
-    if path == OCC3D:
-        assert cfg.val_evaluator.use_camera_mask
-        assert model.loss_mask_key == 'mask_camera'
-        assert head.loss_occ.empty_index == cfg.class_names.index('free')
+    assert coupled_value_mismatches(cfg, 'occ_cyl') == []
+    aug = [t for t in cfg.train_pipeline if t.type == 'MultiViewImageAug']
+    assert aug[0].final_size == cfg.img_size
 
 
-def test_ablation_deltas():
-    """Each ablation changes exactly the knob its name says (and what is
-    coupled to it), nothing else."""
-    expected = {
-        'occcyl-nodepthsup': {'loss_depth'},
-        'occcyl-nodepthfeat': {'depth_net.with_depth_feature'},
-        'occcyl-nopos': {'depth_net.position_channels'},
-        'occcyl-m1': {'tpv_fusion.num_groups'},
-        'occcyl-m2': {'tpv_fusion.num_groups'},
-        'occcyl-m4': {'tpv_fusion.num_groups'},
-    }
-    bins_keys = {
-        'depth_bound', 'depth_net.num_depth_bins',
-        'depth_net.position_channels', 'loss_depth.depth_bound'
-    }
-    expected['occcyl-d2m'] = expected['occcyl-d10m'] = bins_keys
+def test_ablation_knobs():
+    """Table VI: (1, 51, d) gives 25 bins at d = 2 and 5 at d = 10; Table
+    VII: M = 1, 2, 4."""
     for path in ABLATIONS:
-        name = osp.basename(path).split('_')[0]
-        diff = _model_diff(PAPER, path)
-        # loss_depth=None removes all its sub-keys.
-        diff = {
-            k.split('.')[0] if k.startswith('loss_depth.')
-            and name == 'occcyl-nodepthsup' else k
-            for k in diff
-        }
-        assert diff == expected[name], name
-        model = Config.fromfile(path).model
-        if match := re.search(r'-m(\d)$', name):
-            assert model.tpv_fusion.num_groups == int(match[1])
-        if match := re.search(r'-d(\d+)m$', name):
-            # (1, 51, d): 25 bins at d = 2, 5 bins at d = 10 (Table VI).
-            assert model.depth_net.num_depth_bins == 50 // int(match[1])
-
-
-def test_occ3d_differs_only_in_coupled_values():
-    """The Occ3D config repeats the paper's model; only the grid, classes,
-    empty label, cylinder and the camera-mask loss may differ."""
-    diff = _model_diff(PAPER, OCC3D)
-    allowed = {
-        'tpv_fusion.cyl_range', 'occ_head.cyl_range', 'occ_head.pc_range',
-        'occ_head.num_classes', 'occ_head.loss_occ.empty_index',
-        'occ_head.loss_occ.losses[2].empty_index',
-        'occ_head.loss_occ.losses[3].empty_index', 'loss_mask_key'
-    }
-    assert diff == allowed
-
-
-@pytest.mark.parametrize(
-    'path', MAIN + ABLATIONS, ids=lambda p: osp.basename(p)[:-3])
-def test_model_builds(path):
-    """Every config's model builds (the paper one is reported below)."""
-    cfg = Config.fromfile(path)
-    init_default_scope(cfg.default_scope)  # as the Runner does
-    model = MODELS.build(cfg.model)
-    assert isinstance(model, OccCylindrical)
+        name, model = _name(path), Config.fromfile(path).model
+        if name.startswith('occcyl-d'):
+            step = float(name[len('occcyl-d'):-1])
+            assert model.depth_bound == [1.0, 51.0, step]
+        if name.startswith('occcyl-m'):
+            assert model.tpv_fusion.num_groups == int(name[-1])
 
 
 def test_paper_model_parameter_count(capsys):
