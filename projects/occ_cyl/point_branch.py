@@ -40,7 +40,7 @@ def sample_image_features(xyz: Tensor,
     and zero when none does (eq. 3 of OccCylindrical).
 
     Args:
-        xyz (Tensor): LiDAR-frame points. Shape (P, 3).
+        xyz (Tensor): Working-frame points. Shape (P, 3).
         feats (Tensor): Feature maps of the sample's cameras, covering the
             padded network input. Shape (N, C, h, w).
         lidar2img (Tensor): Full projections. Shape (N, 4, 4).

@@ -103,7 +103,7 @@ class TPVPolarFusion(BaseModule):
         Args:
             depth (Tensor): ``V_depth``. Shape (B*N, D, h, w).
             context (Tensor): ``V_context``. Shape (B*N, C, h, w).
-            cam_points (Tensor): LiDAR-frame point of every bin.
+            cam_points (Tensor): Working-frame point of every bin.
                 Shape (B, N, D, h, w, 3).
 
         Returns:
@@ -134,7 +134,7 @@ class TPVPolarFusion(BaseModule):
 
         Args:
             feats (list[Tensor]): Per sample. Shape (P_i, C).
-            xyz (list[Tensor]): Per sample, LiDAR-frame points.
+            xyz (list[Tensor]): Per sample, working-frame points.
                 Shape (P_i, 3).
 
         Returns:
@@ -164,7 +164,7 @@ class TPVPolarFusion(BaseModule):
             depth (Tensor, optional): ``V_depth``. Shape (B*N, D, h, w).
             context (Tensor, optional): ``V_context``.
                 Shape (B*N, C, h, w).
-            cam_points (Tensor, optional): Bins' LiDAR-frame points.
+            cam_points (Tensor, optional): Bins' working-frame points.
                 Shape (B, N, D, h, w, 3).
             lidar_feats (list[Tensor], optional): Per sample.
                 Shape (P_i, C_lidar).

@@ -9,9 +9,10 @@ from projects.occ_common.geometry.depth import (depth_bin_values,
                                                 patch_min_depth,
                                                 project_nearest,
                                                 project_points)
-from projects.occ_common.testing.occ_inputs import ring_camera_rig
+from projects.occ_common.testing.occ_inputs import (PATCH_DEPTH_BOUND,
+                                                    patch_depth_map,
+                                                    ring_camera_rig)
 
-BOUND = (1.0, 5.0, 1.0)  # D = 4 bins: [1, 2) [2, 3) [3, 4) [4, 5)
 # Camera looking along +z of the working frame, f = 2, principal point
 # (2, 2), 4x4 image: u = 2 x / z + 2, v = 2 y / z + 2.
 K4 = np.array([[2.0, 0, 2, 0], [0, 2, 2, 0], [0, 0, 1, 0], [0, 0, 0, 1]])
@@ -24,25 +25,15 @@ POINTS = np.array([
     [-0.5, 0.5, 1.0],  # u = 1, v = 3 -> pixel (3, 1), depth 1
 ])
 
-
-def _depth_map():
-    """A (1, 4, 4) LiDAR depth map, 2 x 2 patches:
-
-    top-left     (0, 3.5, 0, 2.2)  -> nearest 2.2 -> bin 1
-    top-right    all 0             -> no return
-    bottom-left  (7, 6, 0, 0)      -> nearest 6 >= 5 -> dropped
-    bottom-right (1.0, 4.9, 3, 0)  -> nearest 1.0 -> bin 0
-    """
-    return torch.tensor([[[0.0, 3.5, 0.0, 0.0], [0.0, 2.2, 0.0, 0.0],
-                          [7.0, 6.0, 1.0, 4.9], [0.0, 0.0, 3.0, 0.0]]])
+BOUND = PATCH_DEPTH_BOUND  # 4 bins of 1 m from 1 m
 
 
 def test_patch_min_depth_and_bins():
     """Nearest depth per patch (0 = none) and one-hot bins in (h, w)
     row-major order; only the first and last pixel have a target."""
-    nearest = patch_min_depth(_depth_map(), 2)
+    nearest = patch_min_depth(patch_depth_map(), 2)
     assert torch.allclose(nearest, torch.tensor([[[2.2, 0.0], [6.0, 1.0]]]))
-    onehot, valid = depth_to_bins(_depth_map(), 2, BOUND)
+    onehot, valid = depth_to_bins(patch_depth_map(), 2, BOUND)
     assert onehot.shape == (4, 4)
     assert valid.tolist() == [True, False, False, True]
     assert onehot.tolist() == [[0, 1, 0, 0], [0, 0, 0, 0], [0, 0, 0, 0],

@@ -5,13 +5,17 @@ Conventions (those of mmdet3d 1.x ``lidar2img``):
 * Pixel coordinates are continuous and pixel ``i`` covers ``[i, i + 1)`` (as
   in the depth maps of ``projects.occ_common.transforms``), so a stride-``s``
   feature cell ``j`` is centred on ``(j + 0.5) * s``.
+* Points live in the *working frame* of
+  :mod:`projects.occ_common.transforms.frames` (the LiDAR frame, or the ego
+  frame after ``PointsToEgoFrame`` for Occ3D), called "lidar" in the matrix
+  names as in mmdet3d.
 * All matrices are homogeneous 4x4. ``cam2img`` is the padded intrinsic
   matrix, ``lidar2cam`` the extrinsic and ``img_aug_matrix`` the image
   augmentation; the full projection ``img_aug @ cam2img @ lidar2cam`` maps a
-  LiDAR point ``(x, y, z, 1)`` to ``(u * d, v * d, d, 1)`` where ``(u, v)`` is
-  the augmented pixel and ``d`` the depth along the optical axis. Lifting a
-  pixel at depth ``d`` back to 3D inverts this same matrix, so projection and
-  lifting can never disagree.
+  working-frame point ``(x, y, z, 1)`` to ``(u * d, v * d, d, 1)`` where
+  ``(u, v)`` is the augmented pixel and ``d`` the depth along the optical
+  axis. Lifting a pixel at depth ``d`` back to 3D inverts this same matrix,
+  so projection and lifting can never disagree.
 * Depth bins and point projection are those of
   :mod:`projects.occ_common.geometry.depth` (BEVDepth's bins, lifted at
   their near edge ``min + k * step``), shared with the depth loss and the
@@ -74,14 +78,14 @@ def lidar2img_matrix(cam2img: Tensor, lidar2cam: Tensor,
 
 
 def frustum_to_lidar(frustum: Tensor, lidar2img: Tensor) -> Tensor:
-    """Lift every frustum point ``(u, v, d)`` into the LiDAR frame.
+    """Lift every frustum point ``(u, v, d)`` into the working frame.
 
     Args:
         frustum (Tensor): From :func:`create_frustum`. Shape (D, h, w, 3).
         lidar2img (Tensor): Full projections. Shape (B, N, 4, 4).
 
     Returns:
-        Tensor: LiDAR-frame points. Shape (B, N, D, h, w, 3).
+        Tensor: Working-frame points. Shape (B, N, D, h, w, 3).
     """
     if lidar2img.dim() != 4 or lidar2img.shape[-2:] != (4, 4):
         raise ValueError('lidar2img must be (B, N, 4, 4), got '
@@ -99,10 +103,10 @@ def cylindrical_position_embedding(points: Tensor,
                                    cyl_range: Sequence[float]) -> Tensor:
     """Normalised cylindrical coordinates of the frustum: ``V_coord`` (eq. 5).
 
-    Each bin's LiDAR-frame point is converted to ``(r, theta, z)`` and scaled
-    to ``[0, 1]`` by the cylinder range (values outside the range go beyond
-    ``[0, 1]`` unchanged so the network still sees them). The ``D`` bins are
-    stacked on channels, as in PETR's 3D position embedding.
+    Each bin's working-frame point is converted to ``(r, theta, z)`` and
+    scaled to ``[0, 1]`` by the cylinder range (values outside the range go
+    beyond ``[0, 1]`` unchanged so the network still sees them). The ``D``
+    bins are stacked on channels, as in PETR's 3D position embedding.
 
     Args:
         points (Tensor): From :func:`frustum_to_lidar`.
