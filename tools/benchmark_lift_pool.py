@@ -9,8 +9,9 @@ Measures, at the size a config describes (the paper's by default: 6 views of
    the fused autograd Function and with the naive outer-product-then-pool
    path, forward and forward + backward, on the voxel indices of the real
    frustum geometry. Each measurement runs in a fresh child process: the
-   peak RSS (``VmHWM``, reset through ``/proc/self/clear_refs``) minus the
-   RSS once the inputs exist is the memory the lift itself needs;
+   peak RSS minus the RSS once the inputs exist
+   (:class:`projects.occ_common.utils.benchmarking.PeakMemory`) is the
+   memory the lift itself needs;
 2. the forward latency of the whole model (``--model``), optionally at a
    reduced image size (``--img-scale``) when the full one does not fit the
    machine.
@@ -27,7 +28,6 @@ import argparse
 import json
 import math
 import os
-import resource
 import subprocess
 import sys
 import time
@@ -37,6 +37,8 @@ import torch
 from mmengine.config import Config
 from mmengine.registry import init_default_scope
 from mmengine.utils import import_modules_from_strings
+
+from projects.occ_common.utils.benchmarking import PeakMemory
 
 
 def parse_args():
@@ -59,24 +61,6 @@ def parse_args():
     parser.add_argument('--threads', type=int, default=2)
     parser.add_argument('--child', help=argparse.SUPPRESS)
     return parser.parse_args()
-
-
-def _status_kib(field):
-    with open('/proc/self/status') as f:
-        for line in f:
-            if line.startswith(field + ':'):
-                return int(line.split()[1])
-    raise RuntimeError(f'{field} not in /proc/self/status')
-
-
-def _reset_peak():
-    """Reset VmHWM to the current RSS; False where the kernel refuses."""
-    try:
-        with open('/proc/self/clear_refs', 'w') as f:
-            f.write('5')
-        return True
-    except OSError:
-        return False
 
 
 def _build_cfg(config):
@@ -156,22 +140,18 @@ def measure_lift(config, mode, threads):
     backward = mode.endswith('backward')
     depth.requires_grad_(backward)
     context.requires_grad_(backward)
-    base = _status_kib('VmRSS')
-    reset = _reset_peak()
-    base_peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    start = time.perf_counter()
-    vol = lift_max_pool(
-        depth,
-        context,
-        voxel_idx,
-        cylinder.num_voxels,
-        fused=fusion.fused_lift,
-        chunk_size=fusion.lift_chunk_size)
-    if backward:
-        vol.backward(torch.ones_like(vol))
-    seconds = time.perf_counter() - start
-    peak = _status_kib('VmHWM') if reset else max(
-        resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, base_peak)
+    with PeakMemory() as memory:
+        start = time.perf_counter()
+        vol = lift_max_pool(
+            depth,
+            context,
+            voxel_idx,
+            cylinder.num_voxels,
+            fused=fusion.fused_lift,
+            chunk_size=fusion.lift_chunk_size)
+        if backward:
+            vol.backward(torch.ones_like(vol))
+        seconds = time.perf_counter() - start
     points = depth.numel()
     return dict(
         mode=mode,
@@ -180,11 +160,11 @@ def measure_lift(config, mode, threads):
         voxels=cylinder.num_voxels,
         occupied_voxels=int((vol.detach().abs().sum(1) > 0).sum()),
         chunk_size=fusion.lift_chunk_size,
-        peak_extra_mib=(peak - base) / 1024,
+        peak_extra_mib=memory.added_bytes / 2**20,
         naive_feature_tensor_mib=points * context_channels * 4 / 2**20,
         output_mib=vol.numel() * 4 / 2**20,
         seconds=seconds,
-        peak_reset=reset)
+        peak_reset=memory.hwm_reset)
 
 
 def measure_model(config, img_scale, repeat, num_points, threads):
@@ -202,15 +182,11 @@ def measure_model(config, img_scale, repeat, num_points, threads):
     points = [torch.cat([xyz, torch.rand(num_points, 2, generator=gen)], 1)]
     inputs = dict(imgs=imgs, points=points)
     times = []
-    base = _status_kib('VmRSS')
-    reset = _reset_peak()
-    with torch.no_grad():
+    with PeakMemory() as memory, torch.no_grad():
         for i in range(repeat + 1):
             start = time.perf_counter()
             model._forward(inputs, [sample])
             times.append(time.perf_counter() - start)
-    peak = _status_kib('VmHWM') if reset else resource.getrusage(
-        resource.RUSAGE_SELF).ru_maxrss
     params = sum(p.numel() for p in model.parameters())
     return dict(
         mode='model',
@@ -219,7 +195,7 @@ def measure_model(config, img_scale, repeat, num_points, threads):
         params_m=params / 1e6,
         first_forward_s=times[0],
         forward_s=float(np.median(times[1:])) if repeat else times[0],
-        peak_extra_mib=(peak - base) / 1024,
+        peak_extra_mib=memory.added_bytes / 2**20,
         threads=threads)
 
 

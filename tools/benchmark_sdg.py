@@ -27,7 +27,6 @@ import argparse
 import json
 import os.path as osp
 import statistics
-import time
 
 import torch
 import torch.nn.functional as F
@@ -35,6 +34,8 @@ from mmdet3d.registry import DATASETS, MODELS
 from mmengine.config import Config
 from mmengine.registry import init_default_scope
 from mmengine.utils import import_modules_from_strings
+
+from projects.occ_common.utils.benchmarking import timed_runs
 
 ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
 CONFIGS = dict(
@@ -131,19 +132,13 @@ def time_forward(model, inputs, samples, repeats, device):
     time; the median is reported with it.
     """
 
-    def sync():
-        if device.startswith('cuda'):
-            torch.cuda.synchronize()
-
-    times = []
     with torch.no_grad():
-        model(inputs, samples, mode='predict')  # warm-up
-        for _ in range(repeats):
-            sync()
-            start = time.perf_counter()
-            model(inputs, samples, mode='predict')
-            sync()
-            times.append(1000 * (time.perf_counter() - start))
+        runs = timed_runs(
+            lambda: model(inputs, samples, mode='predict'),
+            repeats,
+            warmup=1,
+            device=device)
+    times = [1000 * t for t in runs['wall_s']]
     return dict(
         median_ms=statistics.median(times), min_ms=min(times), runs_ms=times)
 

@@ -26,17 +26,15 @@ directly: it draws grids that need no config.
 """
 import argparse
 import os.path as osp
-import sys
 from typing import Dict, Optional, Sequence
 
 import numpy as np
 import torch
 from mmengine.config import DictAction
 
-sys.path.insert(0, osp.dirname(osp.dirname(osp.abspath(__file__))))
-
-from projects.occ_common.visualization import (  # noqa: E402
-    convention_classes, render_data_sample, sample_field, save_png)
+from projects.occ_common.visualization import (convention_classes,
+                                               render_data_sample,
+                                               sample_field, save_png)
 
 
 def parse_args(argv=None):
