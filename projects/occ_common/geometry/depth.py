@@ -1,8 +1,8 @@
 """Depth bins and sparse LiDAR depth maps: the one place that defines them.
 
-A leaf module (torch only): the depth loss, the transforms that build depth
-and semantic maps, the camera geometry of the lifts and SDG-OCC's view
-transform all import from here, so they cannot disagree.
+A leaf module (numpy and torch only): the depth loss, the transforms that
+build depth and semantic maps, the camera geometry of the lifts and
+SDG-OCC's view transform all import from here, so they cannot disagree.
 
 Conventions:
 
@@ -20,11 +20,14 @@ Conventions:
   ``min + k * step``. OccCylindrical's 50 bins "from 1 m to 50 m" at
   d = 1 m are therefore ``(1, 51, 1)``.
 """
-from typing import Optional, Sequence, Tuple
+from typing import Optional, Sequence, Tuple, Union
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import Tensor
+
+ArrayOrTensor = Union[np.ndarray, Tensor]
 
 
 def num_depth_bins(depth_bound: Sequence[float]) -> int:
@@ -64,6 +67,49 @@ def depth_bin_values(depth_bound: Sequence[float]) -> Tensor:
     return d_min + step * torch.arange(num, dtype=torch.float32)
 
 
+class _Ops:
+    """The few functions :func:`project_nearest` needs, for numpy arrays
+    (the transforms' per-sample data, single-threaded like numpy) or torch
+    tensors (the models, any device): one algorithm for both."""
+
+    def __init__(self, like) -> None:
+        self.torch = isinstance(like, Tensor)
+        self.device = like.device if self.torch else None
+
+    def project(self, xyz, lidar2img):
+        """``(u d, v d, d)`` of every point in every view, Shape (N, P)
+        each: :func:`project_points`' homogeneous product for tensors,
+        numpy's faster rotation + translation for arrays (they agree to
+        float rounding)."""
+        if self.torch:
+            homo = torch.cat([xyz, torch.ones_like(xyz[:, :1])], 1)
+            proj = torch.einsum('nij,pj->npi', lidar2img.to(xyz), homo)
+            return proj[..., 0], proj[..., 1], proj[..., 2]
+        cam = lidar2img[:, :3, :3] @ xyz.T + lidar2img[:, :3, 3:]
+        return cam[:, 0], cam[:, 1], cam[:, 2]
+
+    def floor(self, array):
+        return (torch if self.torch else np).floor(array)
+
+    def nonzero(self, mask):
+        return mask.nonzero(as_tuple=True) if self.torch else mask.nonzero()
+
+    def long(self, array):
+        return array.long() if self.torch else array.astype(np.int64)
+
+    def stable_argsort(self, array):
+        return torch.argsort(array, stable=True) if self.torch else \
+            np.argsort(array, kind='stable')
+
+    def ones_bool(self, size):
+        return torch.ones(size, dtype=torch.bool, device=self.device) \
+            if self.torch else np.ones(size, dtype=bool)
+
+    def empty_long(self):
+        return torch.zeros(0, dtype=torch.long, device=self.device) \
+            if self.torch else np.zeros(0, dtype=np.int64)
+
+
 def project_points(points: Tensor,
                    lidar2img: Tensor,
                    eps: float = 1e-5) -> Tuple[Tensor, Tensor]:
@@ -81,27 +127,32 @@ def project_points(points: Tensor,
     """
     if points.dim() != 2 or points.shape[1] != 3:
         raise ValueError(f'points must be (P, 3), got {tuple(points.shape)}')
-    homo = torch.cat([points, points.new_ones(points.shape[0], 1)], dim=1)
-    proj = torch.einsum('nij,pj->npi', lidar2img.to(points), homo)
-    depth = proj[..., 2]
-    uv = proj[..., :2] / depth.clamp(min=eps).unsqueeze(-1)
+    u_depth, v_depth, depth = _Ops(points).project(points, lidar2img)
+    uv = torch.stack([u_depth, v_depth], -1) / depth.clamp(min=eps)[..., None]
     return uv, depth
 
 
 def project_nearest(
-    xyz: Tensor,
-    lidar2img: Tensor,
+    xyz: ArrayOrTensor,
+    lidar2img: ArrayOrTensor,
     img_shape: Sequence[int],
     min_depth: float = 1e-3,
     max_depth: Optional[float] = None,
-    map_shape: Optional[Sequence[int]] = None
-) -> Tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
+    map_shape: Optional[Sequence[int]] = None,
+    eps: float = 1e-5
+) -> Tuple[ArrayOrTensor, ...]:
     """Project points into every view and keep the nearest per map cell.
 
+    One algorithm for numpy arrays (the transforms) and torch tensors (the
+    models): the pixel and cell convention, the depth limits and the
+    nearest-first choice are the same, only the projection product runs in
+    each library's own form.
+
     Args:
-        xyz (Tensor): Points in the working frame. Shape (P, 3).
-        lidar2img (Tensor): Working frame to augmented pixels.
-            Shape (N, 4, 4).
+        xyz (np.ndarray | Tensor): Points in the working frame.
+            Shape (P, 3).
+        lidar2img (np.ndarray | Tensor): Working frame to augmented
+            pixels, same kind as ``xyz``. Shape (N, 4, 4).
         img_shape (Sequence[int]): Image ``(H, W)`` the pixels refer to.
         min_depth (float): Points at this depth or nearer are dropped
             (behind or on the camera). Defaults to 1e-3.
@@ -110,35 +161,37 @@ def project_nearest(
         map_shape (Sequence[int], optional): ``(h, w)`` of the map; a
             stride-``s`` feature map of the image has ``(H / s, W / s)``.
             Defaults to ``img_shape`` (one cell per pixel).
+        eps (float): Smallest depth divided by. Defaults to 1e-5.
 
     Returns:
-        tuple[Tensor, ...]: ``view``, ``row``, ``col`` (int64), ``depth``
-        (the dtype of ``xyz``) and ``index`` (int64, into ``xyz``) of the
-        winning point of each hit cell, sorted by cell. Shapes (K,).
+        tuple: ``view``, ``row``, ``col`` (int64), ``depth`` (the dtype of
+        ``xyz``) and ``index`` (int64, into ``xyz``) of the winning point
+        of each hit cell, sorted by cell. Shapes (K,).
     """
+    ops = _Ops(xyz)
     img_h, img_w = (int(v) for v in img_shape)
     map_h, map_w = (img_h, img_w) if map_shape is None else (
         int(v) for v in map_shape)
-    num_views = lidar2img.shape[0]
-    empty = torch.zeros(0, dtype=torch.long, device=xyz.device)
-    if xyz.shape[0] == 0 or num_views == 0:
-        return empty, empty, empty, xyz.new_zeros(0), empty
-    uv, depth = project_points(xyz, lidar2img)
+    if xyz.shape[0] == 0 or lidar2img.shape[0] == 0:
+        empty = ops.empty_long()
+        return empty, empty, empty, xyz[:0, 0], empty
+    u_depth, v_depth, depth = ops.project(xyz, lidar2img)
     keep = depth > min_depth
     if max_depth is not None:
         keep &= depth < max_depth
-    col = torch.floor(uv[..., 0] * (map_w / img_w))
-    row = torch.floor(uv[..., 1] * (map_h / img_h))
+    safe = depth.clip(min=eps)
+    col = ops.floor(u_depth / safe * (map_w / img_w))
+    row = ops.floor(v_depth / safe * (map_h / img_h))
     keep &= (col >= 0) & (col < map_w) & (row >= 0) & (row < map_h)
-    view, index = torch.nonzero(keep, as_tuple=True)
-    row = row[view, index].long()
-    col = col[view, index].long()
+    view, index = ops.nonzero(keep)
+    row = ops.long(row[view, index])
+    col = ops.long(col[view, index])
     depth = depth[view, index]
     cell = (view * map_h + row) * map_w + col
     # By cell, then nearest first (two stable sorts, as numpy's lexsort).
-    order = torch.argsort(depth, stable=True)
-    order = order[torch.argsort(cell[order], stable=True)]
-    first = torch.ones(order.numel(), dtype=torch.bool, device=xyz.device)
+    order = ops.stable_argsort(depth)
+    order = order[ops.stable_argsort(cell[order])]
+    first = ops.ones_bool(order.shape[0])
     first[1:] = cell[order][1:] != cell[order][:-1]
     win = order[first]
     return view[win], row[win], col[win], depth[win], index[win]

@@ -6,31 +6,15 @@ the augmented images. The projection, the pixel convention and the nearest
 point per pixel are those of :mod:`projects.occ_common.geometry.depth`,
 which the models' depth maps and depth bins use too.
 """
-from typing import Optional, Tuple
+from typing import Optional
 
 import numpy as np
-import torch
 from mmcv.transforms import BaseTransform
 from mmdet3d.registry import TRANSFORMS
 
 from ..datasets.occ_formats import IGNORE_INDEX
 from ..geometry.depth import project_nearest
 from .frames import points_xyz
-
-
-def _project_nearest(xyz: np.ndarray, lidar2img: np.ndarray,
-                     img_shape: Tuple[int, int], min_depth: float,
-                     max_depth: Optional[float] = None) -> tuple:
-    """:func:`~projects.occ_common.geometry.depth.project_nearest` on arrays.
-
-    Returns:
-        tuple[np.ndarray, ...]: ``view``, ``row``, ``col``, ``depth``
-        (float64) and ``index`` of the winning point of each hit pixel.
-    """
-    out = project_nearest(
-        torch.from_numpy(xyz), torch.from_numpy(np.asarray(lidar2img)),
-        img_shape, min_depth, max_depth)
-    return tuple(t.numpy() for t in out)
 
 
 def _key_frame(results: dict) -> np.ndarray:
@@ -97,7 +81,7 @@ class PointsToDepthMaps(BaseTransform):
         lidar2img = np.asarray(results['lidar2img'])
         xyz = points_xyz(results['points'],
                          _key_frame(results) if self.key_frame_only else None)
-        view, row, col, depth, _ = _project_nearest(
+        view, row, col, depth, _ = project_nearest(
             xyz, lidar2img, (height, width), self.min_depth, self.max_depth)
         out = np.zeros((len(lidar2img), height, width), np.float32)
         out[view, row, col] = depth
@@ -164,9 +148,9 @@ class PointsToSemanticMaps(BaseTransform):
                 f'{results.get("token", "?")}')
         keep = labels != self.ignore_index
         xyz = points_xyz(results['points'], keep)
-        view, row, col, _, index = _project_nearest(xyz, lidar2img,
-                                                    (height, width),
-                                                    self.min_depth)
+        view, row, col, _, index = project_nearest(xyz, lidar2img,
+                                                   (height, width),
+                                                   self.min_depth)
         out = np.full((len(lidar2img), height, width), self.ignore_index,
                       np.uint8)
         out[view, row, col] = labels[keep][index]

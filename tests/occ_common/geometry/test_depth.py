@@ -76,16 +76,39 @@ def test_project_points_empty_and_gradient():
         project_points(torch.zeros(3, 2), l2i)
 
 
-def test_project_nearest_by_hand():
+@pytest.mark.parametrize('kind', ['numpy', 'torch'])
+def test_project_nearest_by_hand(kind):
     """Two identical views: each keeps pixel (2, 2) at depth 2 (not 4),
-    (1, 3) at depth 1 and (3, 1) at depth 1."""
-    out = project_nearest(
-        torch.from_numpy(POINTS[:, :3]), torch.from_numpy(np.tile(K4, (2, 1,
-                                                                       1))),
-        (4, 4))
+    (1, 3) at depth 1 and (3, 1) at depth 1; numpy arrays (the transforms)
+    and tensors (the models) give the same answer."""
+    points, lidar2img = POINTS[:, :3], np.tile(K4, (2, 1, 1))
+    if kind == 'torch':
+        points, lidar2img = torch.from_numpy(points), torch.from_numpy(
+            lidar2img)
+    out = project_nearest(points, lidar2img, (4, 4))
     got = sorted(zip(*(t.tolist() for t in out)))
     assert got == [(0, 1, 3, 1.0, 2), (0, 2, 2, 2.0, 0), (0, 3, 1, 1.0, 5),
                    (1, 1, 3, 1.0, 2), (1, 2, 2, 2.0, 0), (1, 3, 1, 1.0, 5)]
+    empty = project_nearest(points[:0], lidar2img, (4, 4))
+    assert [len(t) for t in empty] == [0] * 5
+
+
+def test_numpy_and_torch_agree_on_a_random_cloud():
+    """500 points round two cameras, pixel and 1/4 cell maps: the same
+    winners, depths equal to float64 rounding."""
+    gen = np.random.default_rng(0)
+    cam2img, lidar2cam = ring_camera_rig(2, (32, 64), 32.0)
+    l2i = (cam2img @ lidar2cam).numpy()
+    pts = gen.uniform(-10, 10, (500, 3))
+    for map_shape in (None, (8, 16)):
+        a = project_nearest(pts, l2i, (32, 64), map_shape=map_shape)
+        b = project_nearest(
+            torch.from_numpy(pts), torch.from_numpy(l2i), (32, 64),
+            map_shape=map_shape)
+        assert len(a[0]) > 50
+        for x, y in zip(a[:3] + a[4:], b[:3] + b[4:]):
+            np.testing.assert_array_equal(x, y.numpy())
+        np.testing.assert_allclose(a[3], b[3].numpy(), rtol=1e-12)
 
 
 def test_bad_depth_bound_and_patch():
