@@ -10,15 +10,9 @@ custom_imports = dict(
     imports=['projects.occ_common', 'projects.occ_cyl'],
     allow_failed_imports=False)
 
-# The coupled values, from the dataset base. Occ3D supervises only the
-# voxels the cameras can see (the metric's mask), as BEVDet-Occ and FlashOcc
-# do; the paper does not say.
-model = dict(
-    point_cloud_range=_base_.point_cloud_range,
-    voxel_size=_base_.voxel_size,
-    num_classes=_base_.num_classes,
-    empty_index=_base_.empty_index,
-    loss_mask_key='mask_camera')
+# The coupled values, from the dataset base (with Occ3D's camera mask on
+# the loss; the paper does not say).
+model = _base_.occ_task
 
 # The dataset base crops to BEVDet's 256x704; the paper feeds 1600x900.
 img_size = (900, 1600)

@@ -11,11 +11,7 @@ custom_imports = dict(
     allow_failed_imports=False)
 
 # The coupled values, from the dataset base.
-model = dict(
-    point_cloud_range=_base_.point_cloud_range,
-    voxel_size=_base_.voxel_size,
-    num_classes=_base_.num_classes,
-    empty_index=_base_.empty_index)
+model = _base_.occ_task
 
 # The dataset base crops to BEVDet's 256x704; the paper feeds 1600x900.
 img_size = (900, 1600)

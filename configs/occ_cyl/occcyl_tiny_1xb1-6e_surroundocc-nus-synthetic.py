@@ -5,7 +5,7 @@
 # width and resolution. For smoke tests and the demo, not for accuracy.
 _base_ = [
     '../_base_/datasets/surroundocc-nus-synthetic.py',
-    '../_base_/default_runtime.py', './_base_/occcyl_r50-swint.py'
+    '../_base_/cpu_smoke_runtime.py', './_base_/occcyl_r50-swint.py'
 ]
 
 custom_imports = dict(
@@ -22,10 +22,7 @@ _swin_dims = [16, 32, 64, 128]
 # The coupled values, from the dataset base (the synthetic world writes
 # full-size labels, so the output grid stays), then the smaller model.
 model = dict(
-    point_cloud_range=_base_.point_cloud_range,
-    voxel_size=_base_.voxel_size,
-    num_classes=_base_.num_classes,
-    empty_index=_base_.empty_index,
+    _base_.occ_task,
     # 5 m depth bins (10 bins at 1, 6, ..., 46 m): 6 x 10 x 6 x 10 = 3.6k
     # pseudo points.
     depth_bound=[1.0, 51.0, 5.0],
@@ -86,7 +83,4 @@ train_cfg = dict(max_epochs=max_epochs, val_interval=max_epochs)
 # samples.
 optim_wrapper = dict(optimizer=dict(lr=2e-3))
 param_scheduler = []
-default_hooks = dict(
-    logger=dict(interval=1),
-    checkpoint=dict(interval=max_epochs, max_keep_ckpts=1))
-randomness = dict(seed=0)
+default_hooks = dict(checkpoint=dict(interval=max_epochs))

@@ -10,14 +10,10 @@ custom_imports = dict(
     imports=['projects.occ_common', 'projects.sdg_occ'],
     allow_failed_imports=False)
 
-# The coupled values, from the dataset base; as FlashOcc's use_mask, only
-# the camera-visible voxels of Occ3D are supervised.
+# The coupled values, from the dataset base (with Occ3D's camera mask on
+# the loss, as FlashOcc's use_mask), and the depth bins that cover the grid.
 model = dict(
-    point_cloud_range=_base_.point_cloud_range,
-    voxel_size=_base_.voxel_size,
-    num_classes=_base_.num_classes,
-    empty_index=_base_.empty_index,
-    loss_mask_key='mask_camera',
+    _base_.occ_task,
     # Depth bins of BEVDet-Occ / FlashOcc, which SDG-OCC builds on: 1..45 m
     # at 0.5 m (88 bins); the paper does not list them.
     depth_bound=[1.0, 45.0, 0.5])

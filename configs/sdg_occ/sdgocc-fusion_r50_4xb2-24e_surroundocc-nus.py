@@ -11,12 +11,10 @@ custom_imports = dict(
     imports=['projects.occ_common', 'projects.sdg_occ'],
     allow_failed_imports=False)
 
-# The coupled values, from the dataset base.
+# The coupled values, from the dataset base, and the depth bins, LiDAR
+# voxels and losses that suit its grid.
 model = dict(
-    point_cloud_range=_base_.point_cloud_range,
-    voxel_size=_base_.voxel_size,
-    num_classes=_base_.num_classes,
-    empty_index=_base_.empty_index,
+    _base_.occ_task,
     # Depth bins (not given by the paper): BEVDet's nuScenes 1..60 m at
     # 0.5 m (118 bins), which covers the 50 m grid along every camera axis.
     depth_bound=[1.0, 60.0, 0.5],

@@ -3,7 +3,7 @@
 # a fraction of its width. For smoke tests and the demo, not for accuracy.
 _base_ = [
     '../_base_/datasets/occ3d-nus-synthetic.py',
-    '../_base_/default_runtime.py', './_base_/sdgocc-fusion_r50.py'
+    '../_base_/cpu_smoke_runtime.py', './_base_/sdgocc-fusion_r50.py'
 ]
 
 custom_imports = dict(
@@ -18,11 +18,7 @@ _bev_channels = 32
 
 # The coupled values, from the dataset base, then the smaller model.
 model = dict(
-    point_cloud_range=_base_.point_cloud_range,
-    voxel_size=_base_.voxel_size,
-    num_classes=_base_.num_classes,
-    empty_index=_base_.empty_index,
-    loss_mask_key='mask_camera',
+    _base_.occ_task,
     # 1 m bins (the full configs use 0.5 m) halve the LSS fallback's points.
     depth_bound=[1.0, 45.0, 1.0],
     img_backbone=dict(
@@ -82,7 +78,4 @@ train_cfg = dict(max_epochs=max_epochs, val_interval=max_epochs)
 # samples.
 optim_wrapper = dict(optimizer=dict(lr=1e-3))
 param_scheduler = []
-default_hooks = dict(
-    logger=dict(interval=1),
-    checkpoint=dict(interval=max_epochs, max_keep_ckpts=1))
-randomness = dict(seed=0)
+default_hooks = dict(checkpoint=dict(interval=max_epochs))

@@ -1,6 +1,8 @@
-"""The OccCylindrical configs are deltas that state each fact once; the
-tiny one trains and tests. (test_all_configs.py builds every config and
-compares its model with the committed fingerprint.)"""
+"""The OccCylindrical configs are deltas that state each fact once.
+
+test_all_configs.py builds every config and compares its model with the
+committed fingerprint; test_tiny_configs.py trains the tiny ones.
+"""
 import glob
 import os.path as osp
 
@@ -11,10 +13,6 @@ from mmengine.registry import init_default_scope
 
 from projects.occ_common.testing.config_delta import (coupled_value_mismatches,
                                                       model_delta)
-from projects.occ_common.testing.tool_logs import (last_test_metrics,
-                                                   make_converted_world,
-                                                   mean_of_class_ious,
-                                                   run_tool, train_losses)
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIG_DIR = osp.join(ROOT, 'configs', 'occ_cyl')
@@ -105,46 +103,3 @@ def test_paper_model_parameter_count(capsys):
         print(f'\nOccCylindrical paper config: {total / 1e6:.2f} M '
               f'parameters (paper: 111.62 M); ' +
               ', '.join(f'{k} {v / 1e6:.2f} M' for k, v in parts.items() if v))
-
-
-# ---------------------------------------------------------------------------
-# End to end: tools/train.py and tools/test.py on a synthetic world.
-# ---------------------------------------------------------------------------
-@pytest.fixture(scope='module')
-def synthetic_root(tmp_path_factory):
-    """Two scenes of two key frames (one for training, one for val), two
-    sweeps per key-frame interval, 160x96 images."""
-    root = str(tmp_path_factory.mktemp('occcyl') / 'synthetic_nuscenes')
-    return make_converted_world(
-        root, scenes=2, samples=2, sweeps=2, image_size=(160, 96))
-
-
-@pytest.mark.slow
-def test_tiny_config_trains_and_tests(synthetic_root, tmp_path):
-    """The loss falls over 4 epochs of 2 samples (the mean of the last two
-    iterations is below that of the first two) and tools/test.py reports
-    IoU and mIoU through OccupancyMetric."""
-    data = [
-        f'{split}_dataloader.dataset.data_root={synthetic_root}'
-        for split in ('train', 'val', 'test')
-    ]
-    work_dir = str(tmp_path / 'work')
-    proc = run_tool('train.py', TINY, '--work-dir', work_dir, '--cfg-options',
-                    'train_cfg.max_epochs=4', 'train_cfg.val_interval=4',
-                    'default_hooks.checkpoint.interval=4', *data)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    losses = train_losses(work_dir)
-    assert len(losses) == 8
-    assert sum(losses[-2:]) < sum(losses[:2])
-    proc = run_tool('test.py', TINY, osp.join(work_dir,
-                                              'epoch_4.pth'), '--work-dir',
-                    str(tmp_path / 'test'), '--cfg-options', *data)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    metrics = last_test_metrics(str(tmp_path / 'test'))
-    # SurroundOcc: mIoU is the mean over classes 1..16 present in GT or
-    # prediction; IoU is occupied vs empty, within (0, 100) once anything is
-    # predicted occupied.
-    names = Config.fromfile(TINY).class_names[1:]
-    assert metrics['occ/mIoU'] == pytest.approx(
-        mean_of_class_ious(metrics, names), abs=1e-3)
-    assert 0.0 < metrics['occ/IoU'] < 100.0

@@ -1,6 +1,8 @@
-"""The SDG-OCC configs are deltas that state each fact once; the tiny ones
-train and test end to end. (test_all_configs.py builds every config and
-compares its model with the committed fingerprint.)"""
+"""The SDG-OCC configs are deltas that state each fact once.
+
+test_all_configs.py builds every config and compares its model with the
+committed fingerprint; test_tiny_configs.py trains the tiny ones.
+"""
 import glob
 import os.path as osp
 import re
@@ -10,10 +12,6 @@ from mmengine.config import Config
 
 from projects.occ_common.testing.config_delta import (coupled_value_mismatches,
                                                       model_delta)
-from projects.occ_common.testing.tool_logs import (last_test_metrics,
-                                                   make_converted_world,
-                                                   mean_of_class_ious,
-                                                   run_tool, train_losses)
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIG_DIR = osp.join(ROOT, 'configs', 'sdg_occ')
@@ -127,43 +125,3 @@ def test_ablation_knobs():
         else:
             assert '-lss_' in name
             assert model.view_transform.use_sdg is False
-
-
-# ---------------------------------------------------------------------------
-# End to end: tools/train.py and tools/test.py on a synthetic world.
-# ---------------------------------------------------------------------------
-@pytest.fixture(scope='module')
-def synthetic_root(tmp_path_factory):
-    """Two scenes of two key frames (one for training, one for val)."""
-    root = str(tmp_path_factory.mktemp('sdg') / 'synthetic_nuscenes')
-    return make_converted_world(
-        root, scenes=2, samples=2, sweeps=1, image_size=(352, 198))
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize('path', TINY, ids=lambda p: osp.basename(p)[:-3])
-def test_tiny_config_trains_and_tests(path, synthetic_root, tmp_path):
-    """Loss falls over 4 epochs of 2 samples and test.py reports a mIoU."""
-    data = [
-        f'{split}_dataloader.dataset.data_root={synthetic_root}'
-        for split in ('train', 'val', 'test')
-    ]
-    work_dir = str(tmp_path / 'work')
-    proc = run_tool('train.py', path, '--work-dir', work_dir, '--cfg-options',
-                    'train_cfg.max_epochs=4', 'train_cfg.val_interval=4',
-                    'default_hooks.checkpoint.interval=4', *data)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    losses = train_losses(work_dir)
-    assert len(losses) == 8
-    assert sum(losses[-2:]) < sum(losses[:2])
-    proc = run_tool('test.py', path, osp.join(work_dir,
-                                              'epoch_4.pth'), '--work-dir',
-                    str(tmp_path / 'test'), '--cfg-options', *data)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    metrics = last_test_metrics(str(tmp_path / 'test'))
-    # Occ3D: mIoU is the mean over classes 0..16 (not 'free') present in
-    # the camera-masked GT or prediction.
-    names = Config.fromfile(path).class_names[:-1]
-    assert metrics['occ/mIoU'] == pytest.approx(
-        mean_of_class_ious(metrics, names), abs=1e-3)
-    assert 0.0 < metrics['occ/IoU'] < 100.0

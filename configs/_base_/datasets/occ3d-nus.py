@@ -1,7 +1,7 @@
 # nuScenes + Occ3D-nuScenes occupancy labels (200x200x16, 0.4 m, ego frame).
 # For the synthetic world use occ3d-nus-synthetic.py (or override
 # data_root). The grid and classes below are the coupled values of every
-# model config on this dataset: they read them from here.
+# model config on this dataset: they take them from occ_task.
 _base_ = ['./nus-occ-common.py']
 
 occ_format = 'occ3d'
@@ -22,6 +22,16 @@ class_names = [
 ]
 num_classes = len(class_names)
 empty_index = class_names.index('free')
+# What every model config on this dataset merges into its `model` (the task
+# arguments of the occupancy detectors): the grid, the classes, the empty
+# label and, as the metric counts only camera-visible voxels, only those
+# are supervised (BEVDet-Occ / FlashOcc's use_mask; neither paper says).
+occ_task = dict(
+    point_cloud_range=point_cloud_range,
+    voxel_size=voxel_size,
+    num_classes=num_classes,
+    empty_index=empty_index,
+    loss_mask_key='mask_camera')
 
 _labels = [
     dict(type='LoadOccupancyGT', occ_format=occ_format),

@@ -1,7 +1,7 @@
 # nuScenes + SurroundOcc occupancy labels (200x200x16, 0.5 m, LiDAR frame).
 # For the synthetic world use surroundocc-nus-synthetic.py (or override
 # data_root). The grid and classes below are the coupled values of every
-# model config on this dataset: they read them from here.
+# model config on this dataset: they take them from occ_task.
 _base_ = ['./nus-occ-common.py']
 
 occ_format = 'surroundocc'
@@ -22,6 +22,15 @@ class_names = [
 ]
 num_classes = len(class_names)
 empty_index = class_names.index('empty')
+# What every model config on this dataset merges into its `model` (the task
+# arguments of the occupancy detectors): the grid, the classes and the
+# empty label. SurroundOcc has no visibility mask: every voxel is
+# supervised.
+occ_task = dict(
+    point_cloud_range=point_cloud_range,
+    voxel_size=voxel_size,
+    num_classes=num_classes,
+    empty_index=empty_index)
 
 _labels = [dict(type='LoadOccupancyGT', occ_format=occ_format)]
 _crop_and_pack = [
