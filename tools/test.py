@@ -1,17 +1,21 @@
 """Evaluate a checkpoint (mmdet3d 1.x ``tools/test.py`` interface).
 
-This script imports no plugin code: a config registers what it needs with
-``custom_imports``, which also installs the weights-only checkpoint loader
-of ``projects.occ_common``. Flags and behaviour follow mmdet3d 1.4's script.
+The models, datasets and hooks come from the config's ``custom_imports``,
+which also installs the weights-only checkpoint loader of
+``projects.occ_common``; the script itself imports only the CPU
+process-group helpers of ``projects.occ_common.utils.cpu_dist``. Flags and
+behaviour follow mmdet3d 1.4's script.
 """
 import argparse
 import os
 import os.path as osp
 
-from cpu_dist import finalize_distributed, setup_cpu_distributed
 from mmengine.config import Config, ConfigDict, DictAction
 from mmengine.registry import RUNNERS
 from mmengine.runner import Runner
+
+from projects.occ_common.utils.cpu_dist import (finalize_distributed,
+                                                setup_cpu_distributed)
 
 
 def parse_args(argv=None):

@@ -1,18 +1,22 @@
 """Train a model from a config (mmdet3d 1.x ``tools/train.py`` interface).
 
-This script imports no plugin code: a config registers what it needs with
-``custom_imports``. Flags and behaviour follow mmdet3d 1.4's script.
+The models, datasets and hooks come from the config's ``custom_imports``;
+the script itself imports only the CPU process-group helpers of
+``projects.occ_common.utils.cpu_dist``. Flags and behaviour follow mmdet3d
+1.4's script.
 """
 import argparse
 import logging
 import os
 import os.path as osp
 
-from cpu_dist import finalize_distributed, setup_cpu_distributed
 from mmengine.config import Config, DictAction
 from mmengine.logging import print_log
 from mmengine.registry import RUNNERS
 from mmengine.runner import Runner
+
+from projects.occ_common.utils.cpu_dist import (finalize_distributed,
+                                                setup_cpu_distributed)
 
 
 def parse_args(argv=None):

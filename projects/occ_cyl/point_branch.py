@@ -10,8 +10,8 @@ from mmdet3d.utils import ConfigType, OptMultiConfig
 from mmengine.model import BaseModule
 from torch import Tensor, nn
 
-from projects.occ_common.models.layers import (cartesian_to_cylindrical,
-                                               project_points)
+from projects.occ_common.geometry.depth import project_points
+from projects.occ_common.models.layers import cartesian_to_cylindrical
 
 
 def _mlp(channels: Sequence[int], norm_cfg: ConfigType) -> nn.Sequential:
@@ -40,7 +40,7 @@ def sample_image_features(xyz: Tensor,
     and zero when none does (eq. 3 of OccCylindrical).
 
     Args:
-        xyz (Tensor): LiDAR-frame points. Shape (P, 3).
+        xyz (Tensor): Working-frame points. Shape (P, 3).
         feats (Tensor): Feature maps of the sample's cameras, covering the
             padded network input. Shape (N, C, h, w).
         lidar2img (Tensor): Full projections. Shape (N, 4, 4).

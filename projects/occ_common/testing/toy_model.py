@@ -24,7 +24,7 @@ class ToyOccupancyDataset(BaseDataset):
 
     Args:
         num_samples (int): Number of samples. Defaults to 8.
-        grid_shape (tuple[int]): ``(X, Y, Z)``. Defaults to (8, 8, 4).
+        occ_shape (tuple[int]): ``(X, Y, Z)``. Defaults to (8, 8, 4).
         num_classes (int): Number of classes, 0 = empty. Defaults to 3.
         noise (float): Feature noise. Defaults to 0.5.
         seed (int): Base seed. Defaults to 0.
@@ -34,13 +34,13 @@ class ToyOccupancyDataset(BaseDataset):
 
     def __init__(self,
                  num_samples: int = 8,
-                 grid_shape: Tuple[int, int, int] = (8, 8, 4),
+                 occ_shape: Tuple[int, int, int] = (8, 8, 4),
                  num_classes: int = 3,
                  noise: float = 0.5,
                  seed: int = 0,
                  **kwargs) -> None:
         self.num_samples = num_samples
-        self.grid_shape = tuple(grid_shape)
+        self.occ_shape = tuple(occ_shape)
         self.num_classes = num_classes
         self.noise = noise
         self.seed = seed
@@ -52,7 +52,7 @@ class ToyOccupancyDataset(BaseDataset):
         for idx in range(self.num_samples):
             gen = torch.Generator().manual_seed(self.seed + idx)
             label = torch.randint(
-                0, self.num_classes, self.grid_shape, generator=gen)
+                0, self.num_classes, self.occ_shape, generator=gen)
             feats = nn.functional.one_hot(label, self.num_classes).float()
             feats = feats + self.noise * torch.randn(
                 feats.shape, generator=gen)
