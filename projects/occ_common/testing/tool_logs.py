@@ -1,5 +1,6 @@
 """Read what tools/test.py logged, for end-to-end tests of the tools."""
 import glob
+import importlib.util
 import json
 import math
 import os.path as osp
@@ -70,6 +71,19 @@ def run_tool(script: str, *args: str,
                           capture_output=True,
                           text=True,
                           timeout=timeout)
+
+
+def run_create_data(*argv: str):
+    """``tools/create_data.py nuscenes ARGV`` run in this process.
+
+    Returns:
+        dict[str, str]: Split name -> written info file.
+    """
+    spec = importlib.util.spec_from_file_location(
+        'create_data', osp.join(REPO_ROOT, 'tools', 'create_data.py'))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.main(['nuscenes', *argv])
 
 
 def make_converted_world(root: str, scenes: int, samples: int, sweeps: int,
