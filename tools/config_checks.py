@@ -134,7 +134,7 @@ def _lookup(cfg: Mapping, key: str) -> Any:
         if isinstance(node, (list, tuple)) and part.isdigit() \
                 and int(part) < len(node):
             node = node[int(part)]
-        elif isinstance(node, Mapping) and part in node:
+        elif hasattr(node, 'keys') and part in node:  # Config, ConfigDict
             node = node[part]
         else:
             return _MISSING
