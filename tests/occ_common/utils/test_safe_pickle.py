@@ -361,3 +361,28 @@ def test_old_checkpoints_with_tagged_buffers_still_resume(tmp_path):
     assert isinstance(buffer, HistoryBuffer)
     assert buffer.mean() == pytest.approx(0.375)
     assert buffer.max_length == 10
+
+
+def test_downloaded_checkpoints_are_loaded_restrictedly(zoo_checkpoint,
+                                                        tmp_path):
+    """http(s):// is served by the restricted loader too once installed
+    (a file:// URL stands in for the download here); a malicious download
+    is refused like a local file."""
+    from mmengine.runner.checkpoint import CheckpointLoader
+
+    from projects.occ_common.utils import install_checkpoint_loader
+    from projects.occ_common.utils.safe_pickle import _load_from_http
+    install_checkpoint_loader()
+    for url in ('https://host/zoo.pth', 'http://host/zoo.pth', 'zoo.pth'):
+        loader = CheckpointLoader._get_checkpoint_loader(url)
+        assert loader.__module__ == 'projects.occ_common.utils.safe_pickle'
+    ckpt = _load_from_http(f'file://{zoo_checkpoint}',
+                           model_dir=str(tmp_path / 'cache'))
+    assert isinstance(ckpt['message_hub']['log_scalars']['train/loss'],
+                      HistoryBuffer)
+    marker = tmp_path / 'pwned'
+    torch.save({'meta': _Evil(marker)}, str(tmp_path / 'evil.pth'))
+    with pytest.raises(UnsafeCheckpointError, match='posix.system'):
+        _load_from_http(f'file://{tmp_path}/evil.pth',
+                        model_dir=str(tmp_path / 'cache'))
+    assert not marker.exists()
