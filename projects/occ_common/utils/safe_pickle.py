@@ -38,6 +38,7 @@ restored after every load, so a file cannot leave a method behind.
 import _compat_pickle
 import collections
 import contextlib
+import functools
 import importlib
 import io
 import os
@@ -125,10 +126,11 @@ _TORCH_DTYPES = {
 }
 
 
-def _history_buffer():
+@functools.lru_cache(maxsize=1)
+def _history_buffer() -> type:
+    """mmengine's ``HistoryBuffer`` class, its default statistics
+    registered (the first instance registers them)."""
     from mmengine.logging.history_buffer import HistoryBuffer
-
-    # The default statistics are registered by the first instance.
     HistoryBuffer()
     return HistoryBuffer
 
@@ -164,8 +166,8 @@ def _history_buffer_getattr(obj: Any, name: str) -> Callable:
 
 
 def _resolve(qualname: str) -> Any:
-    """Import an allowed ``module.name`` (nested names for the 3-part
-    torch ones)."""
+    """The object of an allowed ``module.name`` (``builtins.getattr``: the
+    restricted one)."""
     if qualname == 'builtins.getattr':
         return _history_buffer_getattr
     module, name = qualname.rsplit('.', 1)
@@ -381,13 +383,16 @@ def load_checkpoint_file(filename: str,
             'torch.load(weights_only=False) yourself and re-save its '
             'state_dict.') from None
     except (RuntimeError, EOFError, pickle.UnpicklingError, ValueError,
-            OSError, KeyError, IndexError) as err:
-        if isinstance(err, FileNotFoundError):
+            KeyError, IndexError) as err:
+        # Other RuntimeErrors (a CUDA checkpoint on a CPU machine, ...) are
+        # not about the file's integrity: let them through.
+        if isinstance(err, RuntimeError) and not any(
+                word in str(err) for word in ('PytorchStreamReader', 'zip')):
             raise
+        first_line = (str(err).splitlines() or [''])[0]
         raise CorruptFileError(
             f'checkpoint {filename} is truncated or not a torch checkpoint '
-            f'({type(err).__name__}: {str(err).splitlines()[0]}).'
-        ) from None
+            f'({type(err).__name__}: {first_line}).') from None
 
 
 def _load_from_local(filename: str, map_location=None):
