@@ -1,5 +1,8 @@
 # The README's two commands: `make demo` and `make test`. Both set up the
 # pinned environment first (tools/setup_env.sh; a no-op once it is current).
+# `make setup VENV=/path/to/env` completes an existing (e.g. CUDA)
+# environment, keeping its torch, mmcv and spconv-cuXXX where they fit;
+# PYTHON=python3.10 picks the interpreter of a new one (docs/install.md).
 VENV ?= .venv
 PY := $(VENV)/bin/python
 export VENV

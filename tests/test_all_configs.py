@@ -1,43 +1,64 @@
-"""Every config under configs/ loads and builds its model and evaluator.
+"""Every config under configs/ loads and builds the model it always built.
 
-The per-project config tests check coupled values; this one guarantees that
-no config can drift from the code (a renamed argument, a missing import)
-and that the README's configs exist.
+Each config is built once: its model must match the fingerprint committed
+in ``tests/data/config_fingerprints.json`` (parameter count, every
+state-dict entry with its shape, the frozen parameters; see
+:mod:`projects.occ_common.testing.config_fingerprint`), so a refactoring
+of configs or model code cannot change a model unnoticed, and its metric
+must build. A change that is *meant* to change a model (a new config, a
+paper fix) regenerates the fixture in the same commit::
+
+    python -m projects.occ_common.testing.config_fingerprint --write
+
+(run it with the repository on ``PYTHONPATH``; without ``--write`` it
+lists the configs that differ). The per-project config tests check the
+coupled values; this one also checks that the README's configs exist.
 """
-import glob
+import json
 import os.path as osp
 import re
 
 import pytest
 from mmengine.config import Config
 
+from projects.occ_common.testing.config_fingerprint import (FIXTURE,
+                                                            build_model,
+                                                            config_paths,
+                                                            differences,
+                                                            model_fingerprint)
+
 ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
-CONFIGS = sorted(
-    p for p in glob.glob(osp.join(ROOT, 'configs', '**', '*.py'),
-                         recursive=True) if '_base_' not in p)
+CONFIGS = config_paths(ROOT)
+
+
+@pytest.fixture(scope='module')
+def fingerprints():
+    with open(FIXTURE) as f:
+        return json.load(f)
 
 
 def test_every_project_has_configs():
     """Both models ship paper, ablation and tiny configs."""
-    names = [osp.relpath(p, ROOT) for p in CONFIGS]
     for project in ('occ_cyl', 'sdg_occ'):
-        ours = [n for n in names if n.startswith(f'configs/{project}/')]
+        ours = [n for n in CONFIGS if n.startswith(f'configs/{project}/')]
         assert any('tiny' in n for n in ours), project
         assert any('/ablations/' in n for n in ours), project
         assert len(ours) >= 5, ours
 
 
-@pytest.mark.parametrize(
-    'path', CONFIGS, ids=lambda p: osp.relpath(p, ROOT)[len('configs/'):])
-def test_config_builds_model_and_evaluator(path):
-    """The model and the metric build from the config, with its imports."""
-    from mmdet3d.registry import METRICS, MODELS
-    from mmdet3d.utils import register_all_modules
-    register_all_modules()  # as the Runner does for default_scope mmdet3d
-    cfg = Config.fromfile(path)
+def test_fixture_lists_every_config(fingerprints):
+    """A config added or removed without regenerating the fixture fails."""
+    assert sorted(fingerprints) == CONFIGS
+
+
+@pytest.mark.parametrize('path', CONFIGS, ids=lambda p: p[len('configs/'):])
+def test_config_builds_its_fingerprinted_model(path, fingerprints):
+    """The model matches its fingerprint; the metric builds."""
+    from mmdet3d.registry import METRICS
+    model = build_model(osp.join(ROOT, path))
+    assert differences(fingerprints[path], model_fingerprint(model)) == []
+    cfg = Config.fromfile(osp.join(ROOT, path))
     assert 'projects.occ_common' in cfg.custom_imports['imports']
-    model = MODELS.build(cfg.model)
-    assert sum(p.numel() for p in model.parameters()) > 0
     metric = METRICS.build(cfg.val_evaluator)
     assert metric.default_prefix == 'occ'
 

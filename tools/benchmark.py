@@ -18,36 +18,35 @@ with ``--synthetic-batch`` random data of the shapes the config declares:
 ``--num-points`` points in ``point_cloud_range`` and a ``grid_size``
 label grid, for configs whose data is not at hand.
 
-Peak memory on CUDA is ``torch.cuda.max_memory_allocated`` during one
-call; on CPU it is the process's resident-set high-water mark (Linux
-``VmHWM``, reset through ``/proc/self/clear_refs``; a 1 ms RSS sampler
-where that file is not writable). ``forward_memory_mb`` is the part added
-by the call, ``peak_memory_mb`` the whole process (or all CUDA tensors).
+Peak memory is measured as every benchmark tool does
+(:class:`projects.occ_common.utils.benchmarking.PeakMemory`): on CUDA
+``torch.cuda.max_memory_allocated`` during one call, on CPU the process's
+resident-set high-water mark. ``forward_memory_mb`` is the part added by
+the call, ``peak_memory_mb`` the whole process (or all CUDA tensors).
 
 Usage::
 
     python tools/benchmark.py CONFIG [CKPT] [--compare CONFIG2 [CKPT2]]
         [--device cuda] [--runs 20] [--warmup 5] [--json OUT]
 
-Like the train and test tools this script imports no plugin code: the
-configs register it through ``custom_imports``.
+Like the train and test tools this script takes the models from the
+configs' ``custom_imports``; it imports only the shared benchmark helpers.
 """
 import argparse
 import copy
-import ctypes
 import gc
 import json
 import math
 import os
 import os.path as osp
-import statistics
-import threading
 import time
 from typing import Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 import torch
 from mmengine.config import Config, DictAction
+
+from projects.occ_common.utils.benchmarking import PeakMemory, summarise
 
 #: Points of one nuScenes LiDAR sweep (32 beams, 20 Hz), on average.
 NUSCENES_SWEEP_POINTS = 34720
@@ -97,72 +96,6 @@ def parse_args(argv=None):
         parser.error('expected --runs >= 1, --warmup >= 0, --batch-size '
                      '>= 1.')
     return args
-
-
-class PeakMemory:
-    """Peak memory of the code run inside ``with``: see the module doc.
-
-    After ``__exit__``, ``peak_bytes`` is the high-water mark and
-    ``added_bytes`` its excess over the value at ``__enter__``.
-    """
-
-    def __init__(self, device: torch.device) -> None:
-        self.device = device
-        self.peak_bytes = 0
-        self.added_bytes = 0
-        self.kind = ('cuda_max_allocated'
-                     if device.type == 'cuda' else 'cpu_rss_high_water')
-        self._sampler: Optional[threading.Thread] = None
-        self._running = False
-
-    @staticmethod
-    def _status_bytes(field: str) -> int:
-        """A ``/proc/self/status`` field (kB) in bytes."""
-        with open('/proc/self/status') as f:
-            for line in f:
-                if line.startswith(field + ':'):
-                    return int(line.split()[1]) * 1024
-        raise RuntimeError(f'/proc/self/status has no {field}.')
-
-    def _sample(self) -> None:
-        while self._running:
-            self.peak_bytes = max(self.peak_bytes,
-                                  self._status_bytes('VmRSS'))
-            time.sleep(0.001)
-
-    def __enter__(self) -> 'PeakMemory':
-        if self.device.type == 'cuda':
-            torch.cuda.synchronize(self.device)
-            torch.cuda.reset_peak_memory_stats(self.device)
-            self._before = torch.cuda.memory_allocated(self.device)
-            return self
-        gc.collect()
-        try:  # give freed heap back so that RSS starts from what is used
-            ctypes.CDLL('libc.so.6').malloc_trim(0)
-        except OSError:
-            pass
-        self._before = self._status_bytes('VmRSS')
-        try:
-            with open('/proc/self/clear_refs', 'w') as refs:
-                refs.write('5')  # resets VmHWM to the current RSS
-        except OSError:
-            self._running = True
-            self.peak_bytes = self._before
-            self._sampler = threading.Thread(target=self._sample,
-                                             daemon=True)
-            self._sampler.start()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        if self.device.type == 'cuda':
-            torch.cuda.synchronize(self.device)
-            self.peak_bytes = torch.cuda.max_memory_allocated(self.device)
-        elif self._sampler is not None:
-            self._running = False
-            self._sampler.join()
-        else:
-            self.peak_bytes = self._status_bytes('VmHWM')
-        self.added_bytes = max(0, self.peak_bytes - self._before)
 
 
 def load_config(path: str, options: Optional[dict]) -> Config:
@@ -320,22 +253,6 @@ def test_batch(cfg: Config, batch_size: int) -> Tuple[dict, str]:
     return batch, f'first test batch of {type(loader.dataset).__name__}'
 
 
-def summarise(times_ms: List[float]) -> Dict[str, float]:
-    """Median and spread of the timed runs."""
-    ordered = sorted(times_ms)
-    quartiles = (np.percentile(ordered, [25, 75]).tolist()
-                 if len(ordered) > 1 else [ordered[0]] * 2)
-    return dict(
-        median=statistics.median(ordered),
-        mean=statistics.fmean(ordered),
-        std=statistics.stdev(ordered) if len(ordered) > 1 else 0.0,
-        min=ordered[0],
-        max=ordered[-1],
-        p25=quartiles[0],
-        p75=quartiles[1],
-        runs=times_ms)
-
-
 def predict_once(model: torch.nn.Module, data: dict,
                  device: torch.device) -> None:
     """One timed call: ``test_step`` without autograd, synchronised."""
@@ -353,6 +270,10 @@ def benchmark_model(config: str, checkpoint: Optional[str], args) -> Dict:
     device = torch.device(args.device)
     model = MODELS.build(cfg.model)
     if checkpoint:
+        # The config's plugin provides the restricted loader; nothing is
+        # installed on import.
+        from projects.occ_common.utils import install_checkpoint_loader
+        install_checkpoint_loader()
         load_checkpoint(model, checkpoint, map_location='cpu')
     model.to(device).eval()
     if args.synthetic_batch:

@@ -20,7 +20,6 @@ generated into a temporary folder and converted first::
 import argparse
 import json
 import os.path as osp
-import sys
 import tempfile
 import time
 
@@ -150,8 +149,6 @@ def compare_sweeps(dataset, repeats):
 def main(argv=None):
     """Run the benchmark and print (and optionally save) the figures."""
     args = parse_args(argv)
-    if REPO not in sys.path:
-        sys.path.insert(0, REPO)
     from mmengine.config import Config
     from mmengine.registry import init_default_scope
     cfg = Config.fromfile(args.config)

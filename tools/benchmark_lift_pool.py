@@ -9,8 +9,9 @@ Measures, at the size a config describes (the paper's by default: 6 views of
    the fused autograd Function and with the naive outer-product-then-pool
    path, forward and forward + backward, on the voxel indices of the real
    frustum geometry. Each measurement runs in a fresh child process: the
-   peak RSS (``VmHWM``, reset through ``/proc/self/clear_refs``) minus the
-   RSS once the inputs exist is the memory the lift itself needs;
+   peak RSS minus the RSS once the inputs exist
+   (:class:`projects.occ_common.utils.benchmarking.PeakMemory`) is the
+   memory the lift itself needs;
 2. the forward latency of the whole model (``--model``), optionally at a
    reduced image size (``--img-scale``) when the full one does not fit the
    machine.
@@ -27,7 +28,6 @@ import argparse
 import json
 import math
 import os
-import resource
 import subprocess
 import sys
 import time
@@ -37,6 +37,8 @@ import torch
 from mmengine.config import Config
 from mmengine.registry import init_default_scope
 from mmengine.utils import import_modules_from_strings
+
+from projects.occ_common.utils.benchmarking import PeakMemory
 
 
 def parse_args():
@@ -61,24 +63,6 @@ def parse_args():
     return parser.parse_args()
 
 
-def _status_kib(field):
-    with open('/proc/self/status') as f:
-        for line in f:
-            if line.startswith(field + ':'):
-                return int(line.split()[1])
-    raise RuntimeError(f'{field} not in /proc/self/status')
-
-
-def _reset_peak():
-    """Reset VmHWM to the current RSS; False where the kernel refuses."""
-    try:
-        with open('/proc/self/clear_refs', 'w') as f:
-            f.write('5')
-        return True
-    except OSError:
-        return False
-
-
 def _build_cfg(config):
     cfg = Config.fromfile(config)
     import_modules_from_strings(**cfg.get('custom_imports', {}))
@@ -90,9 +74,9 @@ def _paper_geometry(cfg, img_scale=1.0):
     """nuScenes-like 6-camera ring at the config's image size."""
     from mmdet3d.structures import Det3DDataSample
     img_h, img_w = (int(round(s * img_scale)) for s in cfg.img_size)
-    div = cfg.pad_divisor
+    div = cfg.model.data_preprocessor.pad_size_divisor
     pad_h, pad_w = (math.ceil(s / div) * div for s in (img_h, img_w))
-    num_cams = cfg.num_cams
+    num_cams = len(cfg.cam_names)
     focal = 1266.0 * img_w / 1600.0
     cam2img = np.tile(np.eye(4, dtype=np.float32), (num_cams, 1, 1))
     cam2img[:, 0, 0] = cam2img[:, 1, 1] = focal
@@ -120,64 +104,67 @@ def measure_lift(config, mode, threads):
     torch.set_num_threads(threads)
     cfg = _build_cfg(config)
     from mmdet3d.registry import MODELS
-    fusion_cfg = cfg.model.tpv_fusion.copy()
-    fusion_cfg.update(fused_lift=mode.startswith('fused'), with_lidar=False)
-    fusion = MODELS.build(fusion_cfg)
-    sample, (pad_h, pad_w) = _paper_geometry(cfg)
-    stride = cfg.img_stride
-    feat_h, feat_w = pad_h // stride, pad_w // stride
-    # The lift's inputs need the plugin's geometry helpers and the lift
-    # itself; the config's custom_imports has already imported them.
+
+    # The lift's inputs need the plugin's cylinder and geometry helpers and
+    # the lift itself; the config's custom_imports has already imported
+    # them.
     from projects.occ_common.models.layers import (cartesian_to_cylindrical,
                                                    create_frustum,
                                                    frustum_to_lidar)
+    from projects.occ_cyl.cylindrical import CylinderGrid
     from projects.occ_cyl.lift_pool import lift_max_pool
+    model_cfg = cfg.model
+    # The cylinder OccCylindrical builds for its occupancy range.
+    cylinder = CylinderGrid.covering(model_cfg.point_cloud_range,
+                                     model_cfg.cylinder_shape)
+    fusion = MODELS.build(
+        dict(model_cfg.tpv_fusion, fused_lift=mode.startswith('fused'),
+             with_lidar=False, cylinder=cylinder))
+    sample, (pad_h, pad_w) = _paper_geometry(cfg)
+    stride = model_cfg.img_encoder.out_stride
+    feat_h, feat_w = pad_h // stride, pad_w // stride
+    context_channels = model_cfg.depth_net.context_channels
     frustum = create_frustum((pad_h, pad_w), (feat_h, feat_w),
-                             cfg.depth_bound)
+                             model_cfg.depth_bound)
     l2i = torch.as_tensor(sample.metainfo['lidar2img'])[None]
     cam_points = frustum_to_lidar(frustum, l2i)
-    voxel_idx = fusion.grid.flat_index(
-        cartesian_to_cylindrical(cam_points))[0]
+    voxel_idx = cylinder.flat_index(cartesian_to_cylindrical(cam_points))[0]
     del cam_points
     num_bins = frustum.shape[0]
     gen = torch.Generator().manual_seed(0)
     num_imgs = l2i.shape[1]
     depth = torch.randn(num_imgs, num_bins, feat_h, feat_w,
                         generator=gen).softmax(1)
-    context = torch.randn(num_imgs, cfg.context_channels, feat_h, feat_w,
+    context = torch.randn(num_imgs, context_channels, feat_h, feat_w,
                           generator=gen)
     backward = mode.endswith('backward')
     depth.requires_grad_(backward)
     context.requires_grad_(backward)
-    base = _status_kib('VmRSS')
-    reset = _reset_peak()
-    base_peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    start = time.perf_counter()
-    vol = lift_max_pool(
-        depth,
-        context,
-        voxel_idx,
-        fusion.grid.num_voxels,
-        fused=fusion.fused_lift,
-        chunk_size=fusion.lift_chunk_size)
-    if backward:
-        vol.backward(torch.ones_like(vol))
-    seconds = time.perf_counter() - start
-    peak = _status_kib('VmHWM') if reset else max(
-        resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, base_peak)
+    with PeakMemory() as memory:
+        start = time.perf_counter()
+        vol = lift_max_pool(
+            depth,
+            context,
+            voxel_idx,
+            cylinder.num_voxels,
+            fused=fusion.fused_lift,
+            chunk_size=fusion.lift_chunk_size)
+        if backward:
+            vol.backward(torch.ones_like(vol))
+        seconds = time.perf_counter() - start
     points = depth.numel()
     return dict(
         mode=mode,
         points=points,
-        channels=cfg.context_channels,
-        voxels=fusion.grid.num_voxels,
+        channels=context_channels,
+        voxels=cylinder.num_voxels,
         occupied_voxels=int((vol.detach().abs().sum(1) > 0).sum()),
         chunk_size=fusion.lift_chunk_size,
-        peak_extra_mib=(peak - base) / 1024,
-        naive_feature_tensor_mib=points * cfg.context_channels * 4 / 2**20,
+        peak_extra_mib=memory.added_bytes / 2**20,
+        naive_feature_tensor_mib=points * context_channels * 4 / 2**20,
         output_mib=vol.numel() * 4 / 2**20,
         seconds=seconds,
-        peak_reset=reset)
+        peak_reset=memory.hwm_reset)
 
 
 def measure_model(config, img_scale, repeat, num_points, threads):
@@ -188,22 +175,18 @@ def measure_model(config, img_scale, repeat, num_points, threads):
     model = MODELS.build(cfg.model).eval()
     sample, (pad_h, pad_w) = _paper_geometry(cfg, img_scale)
     gen = torch.Generator().manual_seed(0)
-    imgs = torch.randn(1, cfg.num_cams, 3, pad_h, pad_w, generator=gen)
+    imgs = torch.randn(1, len(cfg.cam_names), 3, pad_h, pad_w, generator=gen)
     # 10 sweeps: uniform in the 100 m box, ground-heavy heights.
     xyz = (torch.rand(num_points, 3, generator=gen) - 0.5) * torch.tensor(
         [100.0, 100.0, 8.0]) + torch.tensor([0.0, 0.0, -1.0])
     points = [torch.cat([xyz, torch.rand(num_points, 2, generator=gen)], 1)]
     inputs = dict(imgs=imgs, points=points)
     times = []
-    base = _status_kib('VmRSS')
-    reset = _reset_peak()
-    with torch.no_grad():
+    with PeakMemory() as memory, torch.no_grad():
         for i in range(repeat + 1):
             start = time.perf_counter()
             model._forward(inputs, [sample])
             times.append(time.perf_counter() - start)
-    peak = _status_kib('VmHWM') if reset else resource.getrusage(
-        resource.RUSAGE_SELF).ru_maxrss
     params = sum(p.numel() for p in model.parameters())
     return dict(
         mode='model',
@@ -212,7 +195,7 @@ def measure_model(config, img_scale, repeat, num_points, threads):
         params_m=params / 1e6,
         first_forward_s=times[0],
         forward_s=float(np.median(times[1:])) if repeat else times[0],
-        peak_extra_mib=(peak - base) / 1024,
+        peak_extra_mib=memory.added_bytes / 2**20,
         threads=threads)
 
 

@@ -27,7 +27,6 @@ import argparse
 import json
 import os.path as osp
 import statistics
-import time
 
 import torch
 import torch.nn.functional as F
@@ -35,6 +34,8 @@ from mmdet3d.registry import DATASETS, MODELS
 from mmengine.config import Config
 from mmengine.registry import init_default_scope
 from mmengine.utils import import_modules_from_strings
+
+from projects.occ_common.utils.benchmarking import timed_runs
 
 ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
 CONFIGS = dict(
@@ -83,9 +84,15 @@ def batches(cfg, model, num_samples, device):
         yield inputs, data['data_samples']
 
 
-def count_points(cfg, sdg_module, inputs, samples, device):
+def count_points(cfg, model, sdg_module, inputs, samples, device):
     """Points each lift pools for one sample."""
-    vt_cfg = cfg.model.view_transform
+    # The view transform with the grid and bins the detector gives it.
+    built = model.view_transform
+    vt_cfg = dict(
+        cfg.model.view_transform,
+        point_cloud_range=built.point_cloud_range,
+        bev_shape=built.bev_shape,
+        depth_bound=built.depth_bound)
     imgs = inputs['imgs']
     stride = cfg.model.downsample
     num = imgs.shape[0] * imgs.shape[1]
@@ -100,7 +107,7 @@ def count_points(cfg, sdg_module, inputs, samples, device):
     num_seg = cfg.model.depth_net.seg_channels
     seg_logits = F.one_hot(labels.clamp(max=num_seg - 1),
                            num_seg).permute(0, 3, 1, 2).float()
-    num_bins = cfg.model.depth_net.num_depth_bins
+    num_bins = model.depth_net.num_depth_bins
     context = torch.ones(num, 1, *feat_shape, device=device)
     prob = torch.full((num, num_bins, *feat_shape), 1.0 / num_bins,
                       device=device)
@@ -125,19 +132,13 @@ def time_forward(model, inputs, samples, repeats, device):
     time; the median is reported with it.
     """
 
-    def sync():
-        if device.startswith('cuda'):
-            torch.cuda.synchronize()
-
-    times = []
     with torch.no_grad():
-        model(inputs, samples, mode='predict')  # warm-up
-        for _ in range(repeats):
-            sync()
-            start = time.perf_counter()
-            model(inputs, samples, mode='predict')
-            sync()
-            times.append(1000 * (time.perf_counter() - start))
+        runs = timed_runs(
+            lambda: model(inputs, samples, mode='predict'),
+            repeats,
+            warmup=1,
+            device=device)
+    times = [1000 * t for t in runs['wall_s']]
     return dict(
         median_ms=statistics.median(times), min_ms=min(times), runs_ms=times)
 
@@ -169,8 +170,8 @@ def main(argv=None):
     for inputs, samples in data:
         with torch.no_grad():
             per_sample.append(
-                count_points(cfgs['fusion'], sdg_module, inputs, samples,
-                             args.device))
+                count_points(cfgs['fusion'], models['fusion'], sdg_module,
+                             inputs, samples, args.device))
     inputs, samples = data[0]
     for variant, model in models.items():
         timings[variant] = time_forward(model, inputs, samples,

@@ -9,12 +9,11 @@ the same weights, and prints one table with wall time, peak memory, the
 torch / spconv ratios of wall time, CPU time and memory, and the largest
 output difference between the backends.
 
-Peak memory is the growth of the process's resident set during one call:
-before the call, freed heap is returned to the OS (``malloc_trim``) and
-Linux's high-water mark is reset (``/proc/self/clear_refs``); after it,
-``VmHWM - VmRSS_before``. This counts every allocator (torch's, spconv's C++
-buffers), which Python's ``tracemalloc`` would not. Where ``clear_refs`` is
-not writable a 1 ms RSS sampling thread is used instead.
+Peak memory is the growth of the process's resident set during one call,
+``VmHWM - VmRSS_before`` with the heap trimmed and the mark reset first
+(:class:`projects.occ_common.utils.benchmarking.PeakMemory`, shared by the
+benchmark tools): it counts every allocator (torch's, spconv's C++
+buffers), which Python's ``tracemalloc`` would not.
 
 One torch thread by default: with two, spconv 2.3.8's CPU strided conv
 intermittently returns wrong features (a race inside spconv; the
@@ -30,22 +29,16 @@ and test tools, which get plugin code from configs), since it benchmarks
 that package and no config.
 """
 import argparse
-import ctypes
-import gc
 import math
-import os.path as osp
 import statistics
 import sys
-import threading
 import time
-from typing import Callable, Dict, List, Optional, Tuple
+from typing import Callable, Dict, List, Tuple
 
 import torch
 
-# Runnable as a script from the repository root without installing.
-sys.path.insert(0, osp.dirname(osp.dirname(osp.abspath(__file__))))
-
-from projects.occ_common.models import sparse  # noqa: E402
+from projects.occ_common.models import sparse
+from projects.occ_common.utils.benchmarking import PeakMemory
 
 RANGE = (-40.0, -40.0, -1.0, 40.0, 40.0, 5.4)
 VOXEL = 0.1
@@ -134,61 +127,6 @@ def voxelize(points: torch.Tensor, channels: int,
     return sparse.SparseTensor(feats, coords, shape, 1)
 
 
-class PeakMemory:
-    """Peak resident-set growth (bytes) of the process inside a block."""
-
-    _libc = None
-
-    def __init__(self) -> None:
-        self.peak = 0
-        self._stop = False
-        self._thread: Optional[threading.Thread] = None
-
-    @staticmethod
-    def _status(field: str) -> int:
-        with open('/proc/self/status') as status:
-            for line in status:
-                if line.startswith(field + ':'):
-                    return int(line.split()[1]) * 1024
-        raise RuntimeError(f'{field} missing from /proc/self/status')
-
-    @classmethod
-    def _trim(cls) -> None:
-        gc.collect()
-        try:
-            cls._libc = cls._libc or ctypes.CDLL('libc.so.6')
-            cls._libc.malloc_trim(0)
-        except OSError:  # not glibc: freed memory may stay resident
-            pass
-
-    def _sample(self) -> None:
-        while not self._stop:
-            self._high = max(self._high, self._status('VmRSS'))
-            time.sleep(0.001)
-
-    def __enter__(self) -> 'PeakMemory':
-        self._trim()
-        self._base = self._status('VmRSS')
-        self._high = self._base
-        try:
-            with open('/proc/self/clear_refs', 'w') as refs:
-                refs.write('5')  # reset VmHWM to the current RSS
-            self._hwm = True
-        except OSError:
-            self._hwm = False
-            self._thread = threading.Thread(target=self._sample, daemon=True)
-            self._thread.start()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        if self._hwm:
-            self._high = self._status('VmHWM')
-        else:
-            self._stop = True
-            self._thread.join()
-        self.peak = max(0, self._high - self._base)
-
-
 def measure(run: Callable[[], object],
             repeats: int) -> Tuple[float, float, int, object]:
     """Median wall and CPU time (s) and peak memory (bytes) of ``run``.
@@ -208,7 +146,7 @@ def measure(run: Callable[[], object],
             walls.append(time.perf_counter() - start)
             cpus.append(time.process_time() - cpu)
         if i == 0:
-            peak = mem.peak
+            peak = mem.added_bytes
     return statistics.median(walls), statistics.median(cpus), peak, result
 
 

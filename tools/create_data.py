@@ -16,8 +16,6 @@ Writes ``<out-dir>/<extra-tag>_infos_{train,val,val_rainy,val_night}.pkl``
 ``projects/occ_common/datasets/converters/nuscenes_occ_converter.py``.
 """
 import argparse
-import os.path as osp
-import sys
 
 
 def parse_args(argv=None):
@@ -60,9 +58,6 @@ def parse_args(argv=None):
 def main(argv=None):
     """Run the converter and print the written files."""
     args = parse_args(argv)
-    root = osp.dirname(osp.dirname(osp.abspath(__file__)))
-    if root not in sys.path:
-        sys.path.insert(0, root)  # run from a checkout without installing
     from projects.occ_common.datasets.converters import nuscenes_occ_converter
     written = nuscenes_occ_converter.create_nuscenes_occ_infos(
         args.root_path,

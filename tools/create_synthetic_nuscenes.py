@@ -8,13 +8,8 @@ See ``projects/occ_common/datasets/synthetic/generate.py`` for the layout.
 """
 import argparse
 import json
-import os.path as osp
-import sys
 
-# Runnable as a script from the repository root without installing.
-sys.path.insert(0, osp.dirname(osp.dirname(osp.abspath(__file__))))
-
-from projects.occ_common.datasets.synthetic import (  # noqa: E402
+from projects.occ_common.datasets.synthetic import (
     CONDITIONS, generate_synthetic_nuscenes)
 
 

@@ -11,7 +11,7 @@ Two sources:
   ``pred_occ`` / ``gt_occ`` / ``mask_camera`` as ``--save-pred`` writes
   them, or Occ3D's ``labels.npz`` with ``semantics``) or an ``.npy``
   (a dense (X, Y, Z) grid, or SurroundOcc's sparse (N, 4) ``x, y, z, label``
-  rows, which need ``--grid-shape``).
+  rows, which need ``--occ-shape``).
 
 Examples::
 
@@ -26,17 +26,15 @@ directly: it draws grids that need no config.
 """
 import argparse
 import os.path as osp
-import sys
 from typing import Dict, Optional, Sequence
 
 import numpy as np
 import torch
 from mmengine.config import DictAction
 
-sys.path.insert(0, osp.dirname(osp.dirname(osp.abspath(__file__))))
-
-from projects.occ_common.visualization import (  # noqa: E402
-    convention_classes, render_data_sample, sample_field, save_png)
+from projects.occ_common.visualization import (convention_classes,
+                                               render_data_sample,
+                                               sample_field, save_png)
 
 
 def parse_args(argv=None):
@@ -64,11 +62,13 @@ def parse_args(argv=None):
     saved.add_argument('--pred', help='.npz / .npy predicted grid')
     saved.add_argument('--gt', help='.npz / .npy ground-truth grid')
     saved.add_argument(
-        '--grid-shape',
+        '--occ-shape',
+        '--grid-shape',  # its former name
+        dest='occ_shape',
         type=int,
         nargs=3,
         default=(200, 200, 16),
-        help='(X, Y, Z) of sparse SurroundOcc .npy files')
+        help='occupancy grid (X, Y, Z) of sparse SurroundOcc .npy files')
     labels = parser.add_argument_group('labels (from the config if given)')
     labels.add_argument(
         '--convention',
@@ -93,14 +93,15 @@ def parse_args(argv=None):
 
 
 def load_grid(path: str, key: str,
-              grid_shape: Sequence[int]) -> Dict[str, np.ndarray]:
+              occ_shape: Sequence[int]) -> Dict[str, np.ndarray]:
     """Read a saved grid (see the module docstring).
 
     Args:
         path (str): ``.npz`` or ``.npy`` file.
         key (str): ``'pred_occ'`` or ``'gt_occ'``: which grid the file is
             given for.
-        grid_shape (Sequence[int]): Shape of a sparse SurroundOcc file.
+        occ_shape (Sequence[int]): ``(X, Y, Z)`` of a sparse SurroundOcc
+            file.
 
     Returns:
         dict[str, np.ndarray]: ``key`` and whatever else the file holds of
@@ -126,27 +127,27 @@ def load_grid(path: str, key: str,
         raise ValueError(f'{path}: expected a .npz or .npy file.')
     array = np.load(path)
     if array.ndim == 2 and array.shape[1] == 4:
-        return {key: sparse_to_dense(array, grid_shape, path)}
+        return {key: sparse_to_dense(array, occ_shape, path)}
     if array.ndim != 3:
         raise ValueError(f'{path}: expected a dense (X, Y, Z) grid or '
                          f'sparse (N, 4) rows, got shape {array.shape}.')
     return {key: array}
 
 
-def sparse_to_dense(rows: np.ndarray, grid_shape: Sequence[int],
+def sparse_to_dense(rows: np.ndarray, occ_shape: Sequence[int],
                     path: str) -> np.ndarray:
     """SurroundOcc's ``x, y, z, label`` rows as a dense grid (0 = empty).
 
     Raises:
-        ValueError: If an index lies outside ``grid_shape``.
+        ValueError: If an index lies outside ``occ_shape``.
     """
     rows = rows.astype(np.int64)
-    shape = np.asarray(grid_shape)
+    shape = np.asarray(occ_shape)
     outside = (rows[:, :3] < 0).any(1) | (rows[:, :3] >= shape).any(1)
     if outside.any():
         raise ValueError(f'{path}: voxel {rows[outside][0, :3].tolist()} is '
-                         f'outside --grid-shape {tuple(grid_shape)}.')
-    dense = np.zeros(tuple(grid_shape), dtype=np.int64)
+                         f'outside --occ-shape {tuple(occ_shape)}.')
+    dense = np.zeros(tuple(occ_shape), dtype=np.int64)
     dense[rows[:, 0], rows[:, 1], rows[:, 2]] = rows[:, 3]
     return dense
 
@@ -176,11 +177,15 @@ def predict_sample(args):
     from mmengine.registry import DATASETS, MODELS, init_default_scope
     from mmengine.runner import load_checkpoint
 
+    from projects.occ_common.utils import install_checkpoint_loader
+
     cfg = Config.fromfile(args.config)
     if args.cfg_options:
         cfg.merge_from_dict(args.cfg_options)
     init_default_scope(cfg.get('default_scope', 'mmdet3d'))
     model = MODELS.build(cfg.model)
+    # Nothing is installed on import: load through the restricted loader.
+    install_checkpoint_loader()
     load_checkpoint(model, args.checkpoint, map_location='cpu')
     model.to(args.device).eval()
     dataset = DATASETS.build(cfg.test_dataloader.dataset)
@@ -208,9 +213,9 @@ def main(argv=None) -> Optional[str]:
     else:
         sample = {}
         if args.gt is not None:
-            sample.update(load_grid(args.gt, 'gt_occ', args.grid_shape))
+            sample.update(load_grid(args.gt, 'gt_occ', args.occ_shape))
         if args.pred is not None:
-            sample.update(load_grid(args.pred, 'pred_occ', args.grid_shape))
+            sample.update(load_grid(args.pred, 'pred_occ', args.occ_shape))
         name = osp.splitext(osp.basename(args.pred or args.gt))[0]
         sample['sample_idx'] = name
     convention = args.convention or labels.get('convention', 'surroundocc')

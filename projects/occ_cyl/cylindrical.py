@@ -27,18 +27,23 @@ class CylinderGrid:
     they are dropped by the voxel pooling; the occupancy head instead checks
     with :meth:`covers_box` that every output voxel lies inside.
 
+    OccCylindrical builds one grid (:meth:`covering` its occupancy range)
+    and hands the same object to every module that needs it.
+
     Args:
-        grid_shape (Sequence[int]): ``(R, Theta, Z)``.
+        shape (Sequence[int]): Cells ``(R, Theta, Z)``; configs call it
+            ``cylinder_shape`` (the occupancy grid's ``(X, Y, Z)`` is
+            ``occ_shape``).
         cyl_range (Sequence[float]): ``(r_min, theta_min, z_min, r_max,
             theta_max, z_max)``, radii and heights in metres, angles in
             radians.
     """
 
-    def __init__(self, grid_shape: Sequence[int],
+    def __init__(self, shape: Sequence[int],
                  cyl_range: Sequence[float]) -> None:
-        if len(grid_shape) != 3 or min(int(s) for s in grid_shape) < 1:
-            raise ValueError('CylinderGrid: grid_shape must be three '
-                             f'positive sizes (R, Theta, Z), got {grid_shape}')
+        if len(shape) != 3 or min(int(s) for s in shape) < 1:
+            raise ValueError('CylinderGrid: shape must be three positive '
+                             f'sizes (R, Theta, Z), got {shape}')
         if len(cyl_range) != 6:
             raise ValueError('CylinderGrid: cyl_range must be (r_min, '
                              'theta_min, z_min, r_max, theta_max, z_max), '
@@ -51,21 +56,46 @@ class CylinderGrid:
         if hi[1] - lo[1] > 2 * math.pi + 1e-6:
             raise ValueError('CylinderGrid: the azimuth range exceeds 2*pi: '
                              f'{cyl_range}')
-        self.grid_shape = tuple(int(s) for s in grid_shape)
+        self.shape = tuple(int(s) for s in shape)
         self.cyl_range = tuple(lo + hi)
         self.full_circle = abs(hi[1] - lo[1] - 2 * math.pi) < 1e-4
+
+    @classmethod
+    def covering(cls,
+                 box: Sequence[float],
+                 shape: Sequence[int],
+                 margin: float = 0.01) -> 'CylinderGrid':
+        """The full-circle cylinder that holds every point of a box.
+
+        Its radius reaches the box's farthest corner, e.g.
+        ``(50^2 + 50^2)^0.5 = 70.71`` m for ``x, y in [-50, 50]``, plus
+        ``margin`` against rounding; its height is the box's and its
+        azimuth ``[-pi, pi]``.
+
+        Args:
+            box (Sequence[float]): ``(x_min, y_min, z_min, x_max, y_max,
+                z_max)``, metres.
+            shape (Sequence[int]): Cells ``(R, Theta, Z)``.
+            margin (float): Metres added to the radius. Defaults to 0.01.
+
+        Returns:
+            CylinderGrid: The grid; :meth:`covers_box` holds for ``box``.
+        """
+        x0, y0, z0, x1, y1, z1 = (float(v) for v in box)
+        r_max = (max(-x0, x1)**2 + max(-y0, y1)**2)**0.5 + margin
+        return cls(shape, (0.0, -math.pi, z0, r_max, math.pi, z1))
 
     @property
     def num_voxels(self) -> int:
         """``R * Theta * Z``."""
-        r, t, z = self.grid_shape
+        r, t, z = self.shape
         return r * t * z
 
     @property
     def voxel_size(self) -> Tuple[float, float, float]:
         """``(dr, dtheta, dz)``."""
         return tuple((self.cyl_range[i + 3] - self.cyl_range[i]) /
-                     self.grid_shape[i] for i in range(3))
+                     self.shape[i] for i in range(3))
 
     def voxel_coords(self, cyl: Tensor) -> Tuple[Tensor, Tensor]:
         """Integer voxel coordinates of cylindrical points.
@@ -80,9 +110,9 @@ class CylinderGrid:
         lo = cyl.new_tensor(self.cyl_range[:3])
         size = cyl.new_tensor(self.voxel_size)
         coords = torch.floor((cyl - lo) / size).long()
-        shape = torch.tensor(self.grid_shape, device=cyl.device)
+        shape = torch.tensor(self.shape, device=cyl.device)
         if self.full_circle:
-            coords[..., 1] = coords[..., 1] % self.grid_shape[1]
+            coords[..., 1] = coords[..., 1] % self.shape[1]
         inside = ((coords >= 0) & (coords < shape)).all(dim=-1)
         return coords, inside
 
@@ -98,7 +128,7 @@ class CylinderGrid:
             Tensor: int64 index, -1 outside the grid. Shape (...).
         """
         coords, inside = self.voxel_coords(cyl)
-        _, nt, nz = self.grid_shape
+        _, nt, nz = self.shape
         flat = (coords[..., 0] * nt + coords[..., 1]) * nz + coords[..., 2]
         if batch_idx is not None:
             flat = flat + batch_idx * self.num_voxels
@@ -142,5 +172,5 @@ class CylinderGrid:
                 and z1 <= zc_max and self.full_circle)
 
     def __repr__(self) -> str:
-        return (f'{type(self).__name__}(grid_shape={self.grid_shape}, '
+        return (f'{type(self).__name__}(shape={self.shape}, '
                 f'cyl_range={self.cyl_range})')

@@ -88,46 +88,61 @@ class CylindricalOccHead(BaseModule):
 
     Args:
         in_channels (int): Channels of the encoded planes.
+        cylinder (CylinderGrid): The cylinder of the planes, the one
+            :class:`OccCylindrical` builds and shares with the fusion.
+        point_cloud_range (Sequence[float]): Cartesian grid range
+            ``(x0, y0, z0, x1, y1, z1)``.
+        voxel_size (Sequence[float]): Voxel edge per axis of the finest
+            scale; scale ``l`` has ``occ_shape // 2^l`` voxels, with
+            ``occ_shape = (X, Y, Z)`` the range over the voxel size.
+        hidden_channels (int): Width of the classifier MLP.
+        num_scales (int): Output scales, finest first. Defaults to 4
+            (200x200x16 down to 25x25x2, eq. 18).
         num_classes (int): Number of classes, empty included. Defaults to
             17 (SurroundOcc-nuScenes).
-        grid_shape (Sequence[int]): Cylinder resolution ``(R, Theta, Z)``.
-        cyl_range (Sequence[float]): Cylinder ranges, see
-            :class:`CylinderGrid`.
-        pc_range (Sequence[float]): Cartesian grid range
-            ``(x0, y0, z0, x1, y1, z1)``.
-        scale_shapes (Sequence[Sequence[int]]): ``(X, Y, Z)`` of every
-            scale, finest first.
-        hidden_channels (int): Width of the classifier MLP.
         loss_occ (dict, optional): Config of the multi-scale occupancy loss
-            (``MultiScaleOccupancyLoss``). Required by :meth:`loss`.
+            (``MultiScaleOccupancyLoss``); it gets ``num_scales``,
+            ``empty_index`` and ``ignore_index`` from here. Required by
+            :meth:`loss`.
+        empty_index (int): Label of empty space. Defaults to 0.
+        ignore_index (int): Label of unsupervised voxels. Defaults to 255.
         init_cfg (dict, optional): Initialisation config. Defaults to None.
     """
 
     def __init__(self,
                  in_channels: int,
-                 grid_shape: Sequence[int],
-                 cyl_range: Sequence[float],
-                 pc_range: Sequence[float],
-                 scale_shapes: Sequence[Sequence[int]],
+                 cylinder: CylinderGrid,
+                 point_cloud_range: Sequence[float],
+                 voxel_size: Sequence[float],
                  hidden_channels: int,
+                 num_scales: int = 4,
                  num_classes: int = 17,
                  loss_occ: OptConfigType = None,
+                 empty_index: int = 0,
+                 ignore_index: int = 255,
                  init_cfg: OptMultiConfig = None) -> None:
         super().__init__(init_cfg=init_cfg)
-        self.grid = CylinderGrid(grid_shape, cyl_range)
-        if not self.grid.covers_box(pc_range):
+        if not cylinder.covers_box(point_cloud_range):
             raise ValueError(
-                f'CylindricalOccHead: the cylinder {self.grid} does not '
-                f'cover the occupancy range {tuple(pc_range)}; its radius '
-                'must reach the corners and its azimuth the full circle')
+                f'CylindricalOccHead: the cylinder {cylinder} does not '
+                'cover the occupancy range '
+                f'{tuple(point_cloud_range)}; its radius must reach the '
+                'corners and its azimuth the full circle')
+        self.cylinder = cylinder
         self.num_classes = num_classes
-        self.scale_shapes = [
-            tuple(int(s) for s in shape) for shape in scale_shapes
+        occ_shape = [
+            round((point_cloud_range[i + 3] - point_cloud_range[i]) /
+                  voxel_size[i]) for i in range(3)
         ]
-        self.wrap = self.grid.full_circle
+        self.scale_shapes = [
+            tuple(s // 2**level for s in occ_shape)
+            for level in range(num_scales)
+        ]
+        self.wrap = cylinder.full_circle
         for level, shape in enumerate(self.scale_shapes):
-            cyl = cartesian_to_cylindrical(voxel_centres(pc_range, shape))
-            norm = self.grid.normalize(cyl).float()
+            cyl = cartesian_to_cylindrical(
+                voxel_centres(point_cloud_range, shape))
+            norm = cylinder.normalize(cyl).float()
             self.register_buffer(f'centres_{level}', norm, persistent=False)
         self.classifiers = nn.ModuleList([
             nn.Sequential(
@@ -135,7 +150,12 @@ class CylindricalOccHead(BaseModule):
                 nn.Linear(hidden_channels, num_classes))
             for _ in self.scale_shapes
         ])
-        self.loss_occ = MODELS.build(loss_occ) if loss_occ else None
+        self.loss_occ = MODELS.build(
+            loss_occ,
+            default_args=dict(
+                num_scales=num_scales,
+                empty_index=empty_index,
+                ignore_index=ignore_index)) if loss_occ else None
 
     def forward(self, mlvl_planes: Sequence[Tuple[Tensor, Tensor, Tensor]]
                 ) -> List[Tensor]:
@@ -200,4 +220,5 @@ class CylindricalOccHead(BaseModule):
 
     def extra_repr(self) -> Optional[str]:
         """str: The cylinder and the output scales, for ``print(model)``."""
-        return f'grid={self.grid}, scale_shapes={self.scale_shapes}'
+        return (f'cylinder={self.cylinder}, '
+                f'scale_shapes={self.scale_shapes}')

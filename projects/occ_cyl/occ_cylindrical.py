@@ -1,35 +1,18 @@
 """OccCylindrical: camera + LiDAR occupancy through cylindrical TPV planes."""
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Dict, List, Sequence, Tuple
 
-import numpy as np
-import torch
-import torch.nn.functional as F
-from mmdet3d.models.detectors import Base3DDetector
 from mmdet3d.registry import MODELS
 from mmdet3d.structures import Det3DDataSample
-from mmdet3d.utils import ConfigType, OptConfigType, OptMultiConfig
+from mmdet3d.utils import ConfigType, OptConfigType
 from torch import Tensor
 
-from projects.occ_common.models.layers import (camera_parameter_vector,
-                                               cartesian_to_cylindrical,
+from projects.occ_common.geometry.depth import num_depth_bins
+from projects.occ_common.models.detectors import BaseOccDetector
+from projects.occ_common.models.layers import (cartesian_to_cylindrical,
                                                create_frustum,
                                                cylindrical_position_embedding,
-                                               depth_bin_values,
-                                               frustum_to_lidar,
-                                               lidar2img_matrix)
-
-
-def _stack_meta(samples: Sequence[Det3DDataSample], key: str,
-                device: torch.device) -> Tensor:
-    """Stack a per-sample metainfo matrix into one float32 tensor."""
-    values = []
-    for i, sample in enumerate(samples):
-        if key not in sample.metainfo:
-            raise ValueError(f'OccCylindrical: sample '
-                             f'{sample.metainfo.get("sample_idx", i)} has no '
-                             f'metainfo {key!r}')
-        values.append(torch.as_tensor(np.asarray(sample.metainfo[key])))
-    return torch.stack(values).to(device=device, dtype=torch.float32)
+                                               frustum_to_lidar)
+from .cylindrical import CylinderGrid
 
 
 def _img_shape(sample: Det3DDataSample) -> Tuple[int, int]:
@@ -46,7 +29,7 @@ def _img_shape(sample: Det3DDataSample) -> Tuple[int, int]:
 
 
 @MODELS.register_module()
-class OccCylindrical(Base3DDetector):
+class OccCylindrical(BaseOccDetector):
     """OccCylindrical (camera + LiDAR 3D semantic occupancy).
 
     Steps 1-8 of the paper: the image encoder gives ``V`` (1/16 of the
@@ -59,6 +42,14 @@ class OccCylindrical(Base3DDetector):
     classifies the Cartesian voxels of four scales (eq. 17). The loss is
     eq. 19: the multi-scale occupancy loss plus the LiDAR depth loss.
 
+    The detector owns the values its children share and builds them with
+    those values: the cylinder (one :class:`CylinderGrid`, covering
+    ``point_cloud_range``, given to the fusion and the head), the depth
+    bins (``depth_bound``: DepthNet's bin count, the position embedding's
+    ``3 * D`` channels, the depth loss) and the occupancy task (grid,
+    classes and labels, see :class:`BaseOccDetector`). A child config that
+    sets one of them differently is refused.
+
     Camera geometry comes from each sample's ``lidar2img`` (or
     ``img_aug_matrix @ cam2img @ lidar2cam``). The data pipeline folds the
     BEV augmentation into every ``lidar2*`` matrix, so ``bda_matrix`` is
@@ -67,23 +58,24 @@ class OccCylindrical(Base3DDetector):
     Args:
         img_encoder (dict): :class:`MultiViewImageEncoder` config.
         depth_net (dict): :class:`DepthNet` config; its
-            ``position_channels`` (0 or ``3 * D``) switches the position
-            embedding.
+            ``position_channels`` defaults to ``3 * D`` (the cylindrical
+            position embedding), 0 switches the embedding off (Table V).
         point_branch (dict): :class:`LidarPointBranch` config.
         tpv_fusion (dict): :class:`TPVPolarFusion` config.
         tpv_encoder (dict): :class:`TPVPlaneEncoder` config.
         occ_head (dict): :class:`CylindricalOccHead` config.
+        point_cloud_range (Sequence[float]): Occupancy grid range, metres.
+        voxel_size (Sequence[float]): Occupancy voxel size, metres.
+        num_classes (int): Occupancy classes, empty included.
+        cylinder_shape (Sequence[int]): Cells ``(R, Theta, Z)`` of the
+            cylinder.
         depth_bound (Sequence[float]): ``(min, max, step)`` of the depth
             bins in metres.
         loss_depth (dict, optional): Depth loss (``DepthBCELoss``); None
             removes the depth supervision (Table V). Defaults to None.
-        loss_mask_key (str, optional): Data-sample field of a bool mask
-            outside which voxels are not supervised (``'mask_camera'`` for
-            Occ3D). Defaults to None.
-        ignore_index (int): Label given to masked voxels. Defaults to 255.
-        data_preprocessor (dict, optional): ``Det3DDataPreprocessor``
-            config. Defaults to None.
-        init_cfg (dict, optional): Initialisation config. Defaults to None.
+        **kwargs: ``empty_index``, ``ignore_index``, ``loss_mask_key``,
+            ``data_preprocessor`` and ``init_cfg`` of
+            :class:`BaseOccDetector`.
     """
 
     def __init__(self,
@@ -93,30 +85,54 @@ class OccCylindrical(Base3DDetector):
                  tpv_fusion: ConfigType,
                  tpv_encoder: ConfigType,
                  occ_head: ConfigType,
+                 point_cloud_range: Sequence[float],
+                 voxel_size: Sequence[float],
+                 num_classes: int,
+                 cylinder_shape: Sequence[int],
                  depth_bound: Sequence[float],
                  loss_depth: OptConfigType = None,
-                 loss_mask_key: Optional[str] = None,
-                 ignore_index: int = 255,
-                 data_preprocessor: OptConfigType = None,
-                 init_cfg: OptMultiConfig = None) -> None:
+                 **kwargs) -> None:
         super().__init__(
-            data_preprocessor=data_preprocessor, init_cfg=init_cfg)
+            point_cloud_range,
+            voxel_size,
+            num_classes,
+            depth_bound=depth_bound,
+            loss_depth=loss_depth,
+            **kwargs)
+        self.cylinder = CylinderGrid.covering(self.point_cloud_range,
+                                              cylinder_shape)
+        num_bins = num_depth_bins(self.depth_bound)
         self.img_encoder = MODELS.build(img_encoder)
-        self.depth_net = MODELS.build(depth_net)
+        self.depth_net = self.build_child(
+            depth_net,
+            depth_bound=self.depth_bound,
+            position_channels=3 * num_bins)
         self.point_branch = MODELS.build(point_branch)
-        self.tpv_fusion = MODELS.build(tpv_fusion)
+        self.tpv_fusion = self.build_child(tpv_fusion, cylinder=self.cylinder)
         self.tpv_encoder = MODELS.build(tpv_encoder)
-        self.occ_head = MODELS.build(occ_head)
-        self.depth_bound = tuple(float(v) for v in depth_bound)
-        self.loss_depth = MODELS.build(loss_depth) if loss_depth else None
-        self.loss_mask_key = loss_mask_key
-        self.ignore_index = ignore_index
-        num_bins = depth_bin_values(self.depth_bound).numel()
+        self.occ_head = self.build_child(
+            occ_head,
+            cylinder=self.cylinder,
+            point_cloud_range=self.point_cloud_range,
+            voxel_size=self.voxel_size,
+            **self.head_defaults())
+        for child in (self.depth_net, self.loss_depth):
+            if child is not None:
+                self.check_child(child, depth_bound=self.depth_bound)
         if self.depth_net.num_depth_bins != num_bins:
             raise ValueError(
                 f'OccCylindrical: depth_bound {self.depth_bound} gives '
                 f'{num_bins} bins but depth_net predicts '
                 f'{self.depth_net.num_depth_bins}')
+        if self.depth_net.position_channels not in (0, 3 * num_bins):
+            raise ValueError(
+                'OccCylindrical: depth_net.position_channels must be 0 (no '
+                f'position embedding) or 3 * {num_bins} bins, got '
+                f'{self.depth_net.position_channels}')
+        self.check_child(
+            self.occ_head.loss_occ,
+            empty_index=self.empty_index,
+            ignore_index=self.ignore_index)
 
     def extract_feat(self, batch_inputs_dict: dict,
                      batch_data_samples: List[Det3DDataSample]) -> dict:
@@ -142,7 +158,7 @@ class OccCylindrical(Base3DDetector):
                              f'for {len(batch_data_samples)} data samples')
         batch_size, num_cams = imgs.shape[:2]
         input_shape = tuple(imgs.shape[-2:])
-        lidar2img = self._lidar2img(batch_data_samples, imgs.device)
+        lidar2img = self.lidar2img(batch_data_samples, imgs.device)
         if lidar2img.shape[1] != num_cams:
             raise ValueError(f'OccCylindrical: {num_cams} images but '
                              f'{lidar2img.shape[1]} camera matrices')
@@ -154,12 +170,9 @@ class OccCylindrical(Base3DDetector):
         pos_embed = cam_params = None
         if self.depth_net.position_channels > 0:
             pos_embed = cylindrical_position_embedding(
-                cam_points, self.tpv_fusion.grid.cyl_range)
+                cam_points, self.cylinder.cyl_range)
         if self.depth_net.camera_param_dims > 0:
-            cam_params = camera_parameter_vector(
-                *(_stack_meta(batch_data_samples, key, imgs.device)
-                  for key in ('cam2img', 'lidar2cam', 'img_aug_matrix')))
-            cam_params = cam_params.flatten(0, 1)
+            cam_params = self.camera_params(batch_data_samples, imgs.device)
         out = self.depth_net(feats, pos_embed, cam_params)
         depth, context = out['depth'], out['context']
 
@@ -176,29 +189,7 @@ class OccCylindrical(Base3DDetector):
     def _inside(self, points: Tensor) -> Tensor:
         """Keep the points that fall in the cylinder. Shape (P', C)."""
         cyl = cartesian_to_cylindrical(points[:, :3])
-        return points[self.tpv_fusion.grid.voxel_coords(cyl)[1]]
-
-    @staticmethod
-    def _lidar2img(samples: Sequence[Det3DDataSample],
-                   device: torch.device) -> Tensor:
-        """Full projection per view. Shape (B, N, 4, 4)."""
-        if all('lidar2img' in s.metainfo for s in samples):
-            return _stack_meta(samples, 'lidar2img', device)
-        return lidar2img_matrix(
-            *(_stack_meta(samples, key, device)
-              for key in ('cam2img', 'lidar2cam', 'img_aug_matrix')))
-
-    def _stack_field(self, samples: Sequence[Det3DDataSample],
-                     key: str) -> Tensor:
-        """Stack a per-sample tensor field, naming the sample if missing."""
-        values = []
-        for i, sample in enumerate(samples):
-            if key not in sample:
-                raise ValueError(
-                    'OccCylindrical: data sample '
-                    f'{sample.metainfo.get("sample_idx", i)} has no {key!r}')
-            values.append(sample.get(key))
-        return torch.stack(values)
+        return points[self.cylinder.voxel_coords(cyl)[1]]
 
     def loss(self, batch_inputs_dict: dict,
              batch_data_samples: List[Det3DDataSample]) -> Dict[str, Tensor]:
@@ -215,26 +206,12 @@ class OccCylindrical(Base3DDetector):
         """
         out = self.extract_feat(batch_inputs_dict, batch_data_samples)
         device = out['depth'].device
-        gt_occ = self._stack_field(batch_data_samples,
-                                   'gt_occ').to(device).long()
-        if self.loss_mask_key is not None:
-            mask = self._stack_field(batch_data_samples,
-                                     self.loss_mask_key).to(device).bool()
-            gt_occ = gt_occ.masked_fill(~mask, self.ignore_index)
-        losses = self.occ_head.loss(out['logits'], gt_occ)
+        losses = self.occ_head.loss(
+            out['logits'], self.occupancy_targets(batch_data_samples, device))
         if self.loss_depth is not None:
-            gt_depth = self._stack_field(batch_data_samples,
-                                         'gt_depth').to(device).float()
-            in_h, in_w = batch_inputs_dict['imgs'].shape[-2:]
-            pad_h, pad_w = in_h - gt_depth.shape[-2], in_w - gt_depth.shape[-1]
-            if pad_h < 0 or pad_w < 0:
-                raise ValueError(
-                    f'OccCylindrical: gt_depth {tuple(gt_depth.shape)} is '
-                    f'larger than the input images {(in_h, in_w)}')
-            # Padded pixels have no LiDAR return (depth 0), like the images.
-            gt_depth = F.pad(gt_depth, (0, pad_w, 0, pad_h))
-            losses['loss_depth'] = self.loss_depth(out['depth'],
-                                                   gt_depth.flatten(0, 1))
+            gt_depth = self.gt_depth(batch_data_samples, device,
+                                     batch_inputs_dict['imgs'].shape[-2:])
+            losses.update(self.depth_losses(out['depth'], gt_depth))
         return losses
 
     def predict(self, batch_inputs_dict: dict,
@@ -252,10 +229,8 @@ class OccCylindrical(Base3DDetector):
             any, stay in place for the metric).
         """
         out = self.extract_feat(batch_inputs_dict, batch_data_samples)
-        pred = self.occ_head.predict(out['logits'])
-        for sample, pred_occ in zip(batch_data_samples, pred):
-            sample.pred_occ = pred_occ
-        return batch_data_samples
+        return self.add_pred_occ(batch_data_samples,
+                                 self.occ_head.predict(out['logits']))
 
     def _forward(self, batch_inputs_dict: dict,
                  batch_data_samples: List[Det3DDataSample]) -> List[Tensor]:

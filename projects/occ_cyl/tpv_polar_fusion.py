@@ -4,7 +4,7 @@ Implements step 5 of OccCylindrical: eqs. 6-7 (cylindrical partition and
 per-voxel max pooling), eqs. 8-13 (spatial group pooling) and the 2D dynamic
 fusion of each camera plane with its LiDAR plane.
 """
-from typing import List, Sequence, Tuple
+from typing import List, Tuple
 
 import torch
 from mmdet3d.registry import MODELS
@@ -26,16 +26,16 @@ class TPVPolarFusion(BaseModule):
     The camera cloud is given in factorised form (depth distribution,
     context and each bin's 3D point) so that the lift and the voxel max
     pooling run as one fused operation (:func:`lift_max_pool`). Points
-    outside the cylinder belong to no voxel and are dropped; pick
-    ``cyl_range`` to cover the occupancy grid (the head checks it).
+    outside the cylinder belong to no voxel and are dropped; the cylinder
+    covers the occupancy grid (:meth:`CylinderGrid.covering`, checked by
+    the head).
 
     With a single modality (``with_camera`` or ``with_lidar`` False) the
     planes of that modality are returned without fusion.
 
     Args:
-        grid_shape (Sequence[int]): Cylinder resolution ``(R, Theta, Z)``.
-        cyl_range (Sequence[float]): ``(r_min, theta_min, z_min, r_max,
-            theta_max, z_max)``.
+        cylinder (CylinderGrid): The cylindrical volume, the one
+            :class:`OccCylindrical` builds and shares with the head.
         cam_channels (int): Channels of the pseudo points (``V_context``).
         lidar_channels (int): Channels of the LiDAR point features.
         plane_channels (int): Channels of every output plane.
@@ -52,8 +52,7 @@ class TPVPolarFusion(BaseModule):
     """
 
     def __init__(self,
-                 grid_shape: Sequence[int],
-                 cyl_range: Sequence[float],
+                 cylinder: CylinderGrid,
                  cam_channels: int,
                  lidar_channels: int,
                  plane_channels: int,
@@ -67,12 +66,12 @@ class TPVPolarFusion(BaseModule):
         super().__init__(init_cfg=init_cfg)
         if not (with_camera or with_lidar):
             raise ValueError('TPVPolarFusion needs at least one modality')
-        self.grid = CylinderGrid(grid_shape, cyl_range)
-        for size in self.grid.grid_shape:
+        self.cylinder = cylinder
+        for size in cylinder.shape:
             if size % num_groups:
                 raise ValueError(
                     f'TPVPolarFusion: num_groups={num_groups} must divide '
-                    f'every axis of grid_shape {self.grid.grid_shape}')
+                    f'every axis of the cylinder {cylinder.shape}')
         self.with_camera = with_camera
         self.with_lidar = with_lidar
         self.fused_lift = fused_lift
@@ -94,7 +93,7 @@ class TPVPolarFusion(BaseModule):
     def _to_volume(self, pooled: Tensor, batch_size: int) -> Tensor:
         """(B * V, C) -> Shape (B, C, R, Theta, Z)."""
         channels = pooled.shape[1]
-        vol = pooled.reshape(batch_size, *self.grid.grid_shape, channels)
+        vol = pooled.reshape(batch_size, *self.cylinder.shape, channels)
         return vol.permute(0, 4, 1, 2, 3).contiguous()
 
     def camera_volume(self, depth: Tensor, context: Tensor,
@@ -104,7 +103,7 @@ class TPVPolarFusion(BaseModule):
         Args:
             depth (Tensor): ``V_depth``. Shape (B*N, D, h, w).
             context (Tensor): ``V_context``. Shape (B*N, C, h, w).
-            cam_points (Tensor): LiDAR-frame point of every bin.
+            cam_points (Tensor): Working-frame point of every bin.
                 Shape (B, N, D, h, w, 3).
 
         Returns:
@@ -118,13 +117,13 @@ class TPVPolarFusion(BaseModule):
                              f'{tuple(cam_points.shape)}')
         batch_idx = torch.arange(
             batch_size, device=depth.device).view(-1, 1, 1, 1, 1)
-        voxel_idx = self.grid.flat_index(
+        voxel_idx = self.cylinder.flat_index(
             cartesian_to_cylindrical(cam_points), batch_idx)
         pooled = lift_max_pool(
             depth,
             context,
             voxel_idx.flatten(0, 1),
-            batch_size * self.grid.num_voxels,
+            batch_size * self.cylinder.num_voxels,
             fused=self.fused_lift,
             chunk_size=self.lift_chunk_size)
         return self._to_volume(pooled, batch_size)
@@ -135,7 +134,7 @@ class TPVPolarFusion(BaseModule):
 
         Args:
             feats (list[Tensor]): Per sample. Shape (P_i, C).
-            xyz (list[Tensor]): Per sample, LiDAR-frame points.
+            xyz (list[Tensor]): Per sample, working-frame points.
                 Shape (P_i, 3).
 
         Returns:
@@ -145,12 +144,12 @@ class TPVPolarFusion(BaseModule):
             raise ValueError(f'TPVPolarFusion: {len(feats)} feature sets '
                              f'for {len(xyz)} point clouds')
         index = [
-            self.grid.flat_index(cartesian_to_cylindrical(p[:, :3]), i)
+            self.cylinder.flat_index(cartesian_to_cylindrical(p[:, :3]), i)
             for i, p in enumerate(xyz)
         ]
         pooled = voxel_max_pool(
             torch.cat(feats, dim=0), torch.cat(index, dim=0),
-            len(feats) * self.grid.num_voxels)
+            len(feats) * self.cylinder.num_voxels)
         return self._to_volume(pooled, len(feats))
 
     def forward(self,
@@ -165,7 +164,7 @@ class TPVPolarFusion(BaseModule):
             depth (Tensor, optional): ``V_depth``. Shape (B*N, D, h, w).
             context (Tensor, optional): ``V_context``.
                 Shape (B*N, C, h, w).
-            cam_points (Tensor, optional): Bins' LiDAR-frame points.
+            cam_points (Tensor, optional): Bins' working-frame points.
                 Shape (B, N, D, h, w, 3).
             lidar_feats (list[Tensor], optional): Per sample.
                 Shape (P_i, C_lidar).

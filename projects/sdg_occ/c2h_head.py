@@ -1,4 +1,4 @@
-"""Channel-to-height occupancy head (FlashOcc) with its losses.
+"""Channel-to-height occupancy head (FlashOcc) with its loss.
 
 SDG-OCC predicts occupancy from a BEV map with FlashOcc's channel-to-height
 head (Yu et al., "FlashOcc", 2023, Sec. 3.3): 2D convolutions produce
@@ -9,9 +9,8 @@ Channel order (FlashOcc's ``BEVOCCHead2D``, whose predictor output is viewed
 as ``(..., Dz, num_classes)``): channel ``c = z * num_classes + cls``, i.e.
 the class index varies fastest.
 """
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, List, Optional
 
-import torch
 from mmdet3d.registry import MODELS
 from mmengine.model import BaseModule
 from torch import Tensor, nn
@@ -54,7 +53,7 @@ def height_logits_to_xyz(logits: Tensor) -> Tensor:
 
 @MODELS.register_module()
 class ChannelToHeightHead(BaseModule):
-    """FlashOcc channel-to-height head with occupancy losses.
+    """FlashOcc channel-to-height head with its occupancy loss.
 
     3x3 conv-BN-ReLU layers, then FlashOcc's per-cell predictor (two 1x1
     convs with a Softplus in between) to ``num_classes * Dz`` channels,
@@ -66,14 +65,11 @@ class ChannelToHeightHead(BaseModule):
         dz (int): Height cells (16 for Occ3D at 0.4 m).
         mid_channels (int): Width of the conv layers. Defaults to 256.
         num_convs (int): Number of 3x3 conv layers. Defaults to 1.
-        losses (list[dict]): Occupancy loss configs, each registered in
-            MODELS with ``forward(logits (B, C, X, Y, Z), target (B, X, Y,
-            Z))`` and a ``loss_name`` property (e.g. ``OccFocalLoss``,
-            ``OccLovaszLoss``, ``SceneClassAffinityLoss``).
-            Defaults to a plain cross-entropy ``OccFocalLoss(gamma=0)``.
-        use_camera_mask (bool): Supervise only voxels of the camera mask
-            (Occ3D's camera-visible voxels, as FlashOcc's ``use_mask``).
-            Defaults to True.
+        loss_occ (dict, optional): The composed occupancy loss
+            (``OccupancyLoss``); it gets ``empty_index`` and
+            ``ignore_index`` from here. Defaults to a plain cross-entropy,
+            ``OccupancyLoss`` of ``OccFocalLoss(gamma=0)``.
+        empty_index (int): Label of empty space. Defaults to 0.
         ignore_index (int): Label without supervision. Defaults to 255.
         init_cfg (dict, optional): mmengine initialisation config.
     """
@@ -84,8 +80,8 @@ class ChannelToHeightHead(BaseModule):
                  dz: int,
                  mid_channels: int = 256,
                  num_convs: int = 1,
-                 losses: Optional[Sequence[dict]] = None,
-                 use_camera_mask: bool = True,
+                 loss_occ: Optional[dict] = None,
+                 empty_index: int = 0,
                  ignore_index: int = 255,
                  init_cfg: Optional[dict] = None):
         super().__init__(init_cfg=init_cfg)
@@ -95,8 +91,6 @@ class ChannelToHeightHead(BaseModule):
                              f', {dz}, {num_convs}')
         self.num_classes = num_classes
         self.dz = dz
-        self.use_camera_mask = use_camera_mask
-        self.ignore_index = ignore_index
         layers: List[nn.Module] = []
         channels = in_channels
         for _ in range(num_convs):
@@ -112,18 +106,14 @@ class ChannelToHeightHead(BaseModule):
         self.predictor = nn.Sequential(
             nn.Conv2d(channels, channels * 2, 1), nn.Softplus(),
             nn.Conv2d(channels * 2, num_classes * dz, 1))
-        if losses is None:
-            losses = [dict(type='OccFocalLoss', gamma=0.0)]
-        self.losses = nn.ModuleList([MODELS.build(cfg) for cfg in losses])
-        names = [self._loss_key(loss) for loss in self.losses]
-        if len(set(names)) != len(names):
-            raise ValueError('ChannelToHeightHead losses must have distinct '
-                             f'loss_name properties, got {names}')
-
-    @staticmethod
-    def _loss_key(loss: nn.Module) -> str:
-        name = getattr(loss, 'loss_name', None)
-        return name if name else f'loss_{type(loss).__name__.lower()}'
+        if loss_occ is None:
+            loss_occ = dict(
+                type='OccupancyLoss',
+                losses=[dict(type='OccFocalLoss', gamma=0.0)])
+        self.loss_occ = MODELS.build(
+            loss_occ,
+            default_args=dict(
+                empty_index=empty_index, ignore_index=ignore_index))
 
     def forward(self, x: Tensor) -> Tensor:
         """Occupancy logits of a BEV map.
@@ -140,20 +130,17 @@ class ChannelToHeightHead(BaseModule):
     def loss(self,
              x: Tensor,
              gt_occ: Tensor,
-             mask_camera: Optional[Tensor] = None,
-             prefix: str = '') -> Dict[str, Tensor]:
+             suffix: str = '') -> Dict[str, Tensor]:
         """Occupancy losses of a BEV map.
 
         Args:
             x (Tensor): BEV features. Shape (B, C, Y, X).
-            gt_occ (Tensor): Labels, ``ignore_index`` where unsupervised.
-                Shape (B, X, Y, Z).
-            mask_camera (Tensor, optional): Camera-visible voxels, bool;
-                required when ``use_camera_mask``. Shape (B, X, Y, Z).
-            prefix (str): Appended to every key (e.g. ``'_teacher'``).
+            gt_occ (Tensor): Labels, ``ignore_index`` where unsupervised
+                (the detector applies the camera mask). Shape (B, X, Y, Z).
+            suffix (str): Appended to every key (e.g. ``'_teacher'``).
 
         Returns:
-            dict[str, Tensor]: ``{loss_name + prefix: loss}``.
+            dict[str, Tensor]: ``{loss_name + suffix: loss}``.
         """
         logits = height_logits_to_xyz(self(x))
         expected = (logits.shape[0], ) + tuple(logits.shape[2:])
@@ -161,20 +148,7 @@ class ChannelToHeightHead(BaseModule):
             raise ValueError(f'ChannelToHeightHead: gt_occ must have shape '
                              f'(B, X, Y, Z) = {expected} to match the head, '
                              f'got {tuple(gt_occ.shape)}')
-        target = gt_occ.long()
-        if self.use_camera_mask:
-            if mask_camera is None or mask_camera.shape != gt_occ.shape:
-                got = None if mask_camera is None else tuple(
-                    mask_camera.shape)
-                raise ValueError(
-                    'ChannelToHeightHead(use_camera_mask=True) needs '
-                    f'mask_camera of shape {tuple(gt_occ.shape)}, got {got}')
-            target = torch.where(mask_camera.bool(), target,
-                                 torch.full_like(target, self.ignore_index))
-        return {
-            self._loss_key(loss) + prefix: loss(logits, target)
-            for loss in self.losses
-        }
+        return self.loss_occ(logits, gt_occ.long(), suffix)
 
     def predict(self, x: Tensor) -> Tensor:
         """Most likely class of every voxel.

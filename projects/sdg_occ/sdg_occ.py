@@ -16,45 +16,27 @@ channel-to-height occupancy head.
 """
 from typing import Dict, List, Optional, Sequence, Tuple
 
-import numpy as np
-import torch
-from mmdet3d.models.detectors import Base3DDetector
 from mmdet3d.registry import MODELS
 from torch import Tensor
 
-from projects.occ_common.models.layers.camera_geometry import \
-    camera_parameter_vector
+from projects.occ_common.models.detectors import BaseOccDetector
 from .c2h_head import height_logits_to_xyz
 from .seg_targets import downsample_seg_labels
 
 _VARIANTS = ('fusion', 'kl')
 
 
-def _stack_meta(data_samples: Sequence, key: str, device) -> Tensor:
-    """Stack a per-sample metainfo array into a float tensor."""
-    values = []
-    for index, sample in enumerate(data_samples):
-        if key not in sample.metainfo:
-            raise ValueError(f'SDGOcc: data sample {index} has no metainfo '
-                             f'{key!r} (needed to lift the images)')
-        values.append(torch.as_tensor(np.asarray(sample.metainfo[key])))
-    return torch.stack(values).to(device=device, dtype=torch.float32)
-
-
-def _stack_field(data_samples: Sequence, key: str, device) -> Tensor:
-    """Stack a per-sample ground-truth field into a tensor."""
-    values = []
-    for index, sample in enumerate(data_samples):
-        if not hasattr(sample, key):
-            raise ValueError(f'SDGOcc: data sample {index} has no {key!r} '
-                             '(the training pipeline must pack it)')
-        values.append(torch.as_tensor(getattr(sample, key)))
-    return torch.stack(values).to(device)
-
-
 @MODELS.register_module()
-class SDGOcc(Base3DDetector):
+class SDGOcc(BaseOccDetector):
     """SDG-OCC multi-modal occupancy network.
+
+    The detector owns the values its children share and builds them with
+    those values (see :class:`BaseOccDetector`): the occupancy grid
+    (``point_cloud_range`` and the ``(Y, X)`` BEV of ``voxel_size`` for the
+    view transform and the LiDAR encoder, the ``Z`` height cells, classes
+    and labels for the head) and the depth bins (``depth_bound`` for the
+    DepthNet, the view transform and the depth loss). A child config that
+    sets one of them differently is refused.
 
     Args:
         img_backbone (dict): Image backbone (e.g. ``mmdet.ResNet``).
@@ -64,16 +46,22 @@ class SDGOcc(Base3DDetector):
         view_transform (dict): ``SDGViewTransform``.
         bev_encoder (dict): ``SDGBEVEncoder``.
         occ_head (dict): ``ChannelToHeightHead``.
-        lidar_encoder (dict): ``SPVCNNEncoder``; its BEV must match the
-            camera BEV grid.
+        lidar_encoder (dict): ``SPVCNNEncoder``; its BEV is the camera BEV
+            grid.
         fusion (dict): ``NeighborhoodFusion`` with the LiDAR BEV as source
             and the camera BEV as cross, output channels = camera BEV
             channels.
+        point_cloud_range (Sequence[float]): Occupancy grid range, metres.
+        voxel_size (Sequence[float]): Occupancy voxel size, metres; one BEV
+            cell per voxel column.
+        num_classes (int): Occupancy classes, empty included.
+        depth_bound (Sequence[float]): ``(min, max, step)`` of the depth
+            bins, metres.
         variant (str): ``'fusion'`` or ``'kl'``. Defaults to 'fusion'.
-        distill_loss (dict, optional): ``FOADDistillLoss``; required for
+        loss_distill (dict, optional): ``FOADDistillLoss``; required for
             ``'kl'``.
-        depth_loss (dict, optional): ``DepthBCELoss``. Defaults to None.
-        seg_loss (dict, optional): 2D semantic loss on (N, C) logits, e.g.
+        loss_depth (dict, optional): ``DepthBCELoss``. Defaults to None.
+        loss_seg (dict, optional): 2D semantic loss on (N, C) logits, e.g.
             ``mmdet.CrossEntropyLoss`` with ``ignore_index=255``.
             Defaults to None.
         teacher_loss_weight (float): Factor of the teacher's occupancy
@@ -85,8 +73,9 @@ class SDGOcc(Base3DDetector):
             diffusion from spreading depth into those cells. None ignores
             them instead. Defaults to 0.
         downsample (int): Image-to-feature stride. Defaults to 16.
-        data_preprocessor (dict, optional): Data preprocessor config.
-        init_cfg (dict, optional): mmengine initialisation config.
+        **kwargs: ``empty_index``, ``ignore_index``, ``loss_mask_key``,
+            ``data_preprocessor`` and ``init_cfg`` of
+            :class:`BaseOccDetector`.
     """
 
     def __init__(self,
@@ -98,39 +87,61 @@ class SDGOcc(Base3DDetector):
                  occ_head: dict,
                  lidar_encoder: dict,
                  fusion: dict,
+                 point_cloud_range: Sequence[float],
+                 voxel_size: Sequence[float],
+                 num_classes: int,
+                 depth_bound: Sequence[float],
                  variant: str = 'fusion',
-                 distill_loss: Optional[dict] = None,
-                 depth_loss: Optional[dict] = None,
-                 seg_loss: Optional[dict] = None,
+                 loss_distill: Optional[dict] = None,
+                 loss_depth: Optional[dict] = None,
+                 loss_seg: Optional[dict] = None,
                  teacher_loss_weight: float = 1.0,
                  seg_empty_label: Optional[int] = 0,
                  downsample: int = 16,
-                 data_preprocessor: Optional[dict] = None,
-                 init_cfg: Optional[dict] = None):
+                 **kwargs):
         super().__init__(
-            data_preprocessor=data_preprocessor, init_cfg=init_cfg)
+            point_cloud_range,
+            voxel_size,
+            num_classes,
+            depth_bound=depth_bound,
+            loss_depth=loss_depth,
+            **kwargs)
         if variant not in _VARIANTS:
             raise ValueError(f'SDGOcc variant must be one of {_VARIANTS}, '
                              f'got {variant!r}')
-        if variant == 'kl' and distill_loss is None:
-            raise ValueError("SDGOcc(variant='kl') needs a distill_loss")
+        if variant == 'kl' and loss_distill is None:
+            raise ValueError("SDGOcc(variant='kl') needs a loss_distill")
         self.variant = variant
         self.downsample = int(downsample)
         self.teacher_loss_weight = float(teacher_loss_weight)
         self.seg_empty_label = seg_empty_label
+        bev_shape = (self.occ_shape[1], self.occ_shape[0])  # (Y, X)
+        grid = dict(
+            point_cloud_range=self.point_cloud_range, bev_shape=bev_shape)
         self.img_backbone = MODELS.build(img_backbone)
         self.img_neck = MODELS.build(img_neck)
-        self.depth_net = MODELS.build(depth_net)
-        self.view_transform = MODELS.build(view_transform)
+        self.depth_net = self.build_child(
+            depth_net, depth_bound=self.depth_bound)
+        self.view_transform = self.build_child(
+            view_transform, depth_bound=self.depth_bound, **grid)
         self.bev_encoder = MODELS.build(bev_encoder)
-        self.occ_head = MODELS.build(occ_head)
-        self.lidar_encoder = MODELS.build(lidar_encoder)
+        self.occ_head = self.build_child(
+            occ_head, dz=self.occ_shape[2], **self.head_defaults())
+        self.lidar_encoder = self.build_child(lidar_encoder, **grid)
         self.fusion = MODELS.build(fusion)
-        self.distill_loss = (None if distill_loss is None else
-                             MODELS.build(distill_loss))
-        self.depth_loss = (None
-                           if depth_loss is None else MODELS.build(depth_loss))
-        self.seg_loss = None if seg_loss is None else MODELS.build(seg_loss)
+        self.loss_distill = self.build_child(loss_distill)
+        self.loss_seg = self.build_child(loss_seg)
+        for child in (self.depth_net, self.view_transform, self.loss_depth):
+            if child is not None:
+                self.check_child(child, depth_bound=self.depth_bound)
+        for child in (self.view_transform, self.lidar_encoder):
+            self.check_child(child, **grid)
+        self.check_child(
+            self.occ_head, dz=self.occ_shape[2], num_classes=num_classes)
+        self.check_child(
+            self.occ_head.loss_occ,
+            empty_index=self.empty_index,
+            ignore_index=self.ignore_index)
 
     # ------------------------------------------------------------------
     # Features
@@ -177,13 +188,9 @@ class SDGOcc(Base3DDetector):
         device = imgs.device
         cam_params = None
         if getattr(self.depth_net, 'camera_param_dims', 0) > 0:
-            cam_params = camera_parameter_vector(
-                _stack_meta(data_samples, 'cam2img', device),
-                _stack_meta(data_samples, 'lidar2cam', device),
-                _stack_meta(data_samples, 'img_aug_matrix',
-                            device)).flatten(0, 1)
+            cam_params = self.camera_params(data_samples, device)
         depth_out = self.depth_net(feats, cam_params=cam_params)
-        lidar2img = _stack_meta(data_samples, 'lidar2img', device)
+        lidar2img = self.lidar2img(data_samples, device)
         if lidar2img.shape[:2] != imgs.shape[:2]:
             raise ValueError(f'SDGOcc: lidar2img {tuple(lidar2img.shape)} '
                              f'does not match the images '
@@ -229,35 +236,24 @@ class SDGOcc(Base3DDetector):
                     data_samples: Sequence, device) -> Dict[str, Tensor]:
         """Depth and 2D semantic losses of the DepthNet."""
         losses = {}
-        if self.depth_loss is None and self.seg_loss is None:
+        if self.loss_depth is None and self.loss_seg is None:
             return losses
-        gt_depth = _stack_field(data_samples, 'gt_depth',
-                                device).flatten(0, 1).float()
-        if self.depth_loss is not None:
-            losses['loss_depth'] = self.depth_loss(depth_out['depth'],
-                                                   gt_depth)
-        if self.seg_loss is not None:
+        gt_depth = self.gt_depth(data_samples, device)
+        losses.update(self.depth_losses(depth_out['depth'], gt_depth))
+        if self.loss_seg is not None:
             if 'seg_logits' not in depth_out:
-                raise ValueError('SDGOcc: seg_loss needs a DepthNet with '
+                raise ValueError('SDGOcc: loss_seg needs a DepthNet with '
                                  'seg_channels > 0')
-            gt_seg = _stack_field(data_samples, 'gt_seg_2d',
-                                  device).flatten(0, 1)
+            gt_seg = self.stack_field(data_samples, 'gt_seg_2d',
+                                      device).flatten(0, 1)
             target = downsample_seg_labels(
                 gt_seg, gt_depth, self.downsample,
                 empty_label=self.seg_empty_label)
             logits = depth_out['seg_logits']
-            losses['loss_seg'] = self.seg_loss(
+            losses['loss_seg'] = self.loss_seg(
                 logits.permute(0, 2, 3, 1).reshape(-1, logits.shape[1]),
                 target.reshape(-1))
         return losses
-
-    def _occ_targets(self, data_samples: Sequence,
-                     device) -> Tuple[Tensor, Optional[Tensor]]:
-        gt_occ = _stack_field(data_samples, 'gt_occ', device).long()
-        mask = None
-        if self.occ_head.use_camera_mask:
-            mask = _stack_field(data_samples, 'mask_camera', device).bool()
-        return gt_occ, mask
 
     def loss(self, inputs: dict, data_samples: Sequence) -> Dict[str, Tensor]:
         """Training losses.
@@ -265,7 +261,7 @@ class SDGOcc(Base3DDetector):
         Args:
             inputs (dict): ``imgs`` (B, N, 3, H, W), ``points``.
             data_samples (Sequence[Det3DDataSample]): With ``gt_occ`` (X, Y,
-                Z), ``mask_camera`` (X, Y, Z), ``gt_depth`` and
+                Z), the ``loss_mask_key`` mask if set, ``gt_depth`` and
                 ``gt_seg_2d`` (N, H, W), and the camera metainfo.
 
         Returns:
@@ -274,25 +270,23 @@ class SDGOcc(Base3DDetector):
         """
         device = inputs['imgs'].device
         depth_out, cam = self.extract_camera_bev(inputs, data_samples)
-        gt_occ, mask = self._occ_targets(data_samples, device)
+        gt_occ = self.occupancy_targets(data_samples, device)
         losses = self._aux_losses(depth_out, data_samples, device)
         lidar = self.extract_lidar_bev(inputs)
         fused = self.fuse(lidar, cam)
         if self.variant == 'fusion':
-            losses.update(
-                self.occ_head.loss(self.bev_encoder(fused), gt_occ, mask))
+            losses.update(self.occ_head.loss(self.bev_encoder(fused), gt_occ))
             return losses
-        losses.update(
-            self.occ_head.loss(self.bev_encoder(cam['bev']), gt_occ, mask))
+        losses.update(self.occ_head.loss(self.bev_encoder(cam['bev']), gt_occ))
         teacher = self.occ_head.loss(
-            self.bev_encoder(fused), gt_occ, mask, prefix='_teacher')
+            self.bev_encoder(fused), gt_occ, suffix='_teacher')
         losses.update({
             key: value * self.teacher_loss_weight
             for key, value in teacher.items()
         })
         # The teacher's region is where the LiDAR identified something (the
         # "LiDAR-identified regions" of FOAD), not the whole fused map.
-        losses['loss_distill'] = self.distill_loss(
+        losses['loss_distill'] = self.loss_distill(
             cam['bev'], fused, lidar['bev_mask'], cam['bev_mask'])
         return losses
 
@@ -307,11 +301,10 @@ class SDGOcc(Base3DDetector):
             list[Det3DDataSample]: The input samples with ``pred_occ`` (X, Y,
             Z) long added; their ground truth stays for the metric.
         """
-        occ = self.occ_head.predict(
-            self.bev_encoder(self.extract_feat(inputs, data_samples)))
-        for sample, pred in zip(data_samples, occ):
-            sample.pred_occ = pred
-        return list(data_samples)
+        return self.add_pred_occ(
+            data_samples,
+            self.occ_head.predict(
+                self.bev_encoder(self.extract_feat(inputs, data_samples))))
 
     def _forward(self, inputs: dict, data_samples: Sequence) -> Tensor:
         """Occupancy logits (B, num_classes, X, Y, Z) of the inference path.

@@ -16,9 +16,10 @@ from mmdet3d.registry import MODELS
 from mmengine.model import BaseModule
 from torch import Tensor
 
+from projects.occ_common.geometry.depth import (nearest_depth_map,
+                                                num_depth_bins)
 from projects.occ_common.models.layers.camera_geometry import (
-    create_frustum, frustum_to_lidar, project_points)
-from projects.occ_common.models.losses.depth_bce_loss import num_depth_bins
+    create_frustum, frustum_to_lidar)
 from .bev_pool import (BEVPoolIndexCache, BEVPoolIndices, bev_pool,
                        bev_pool_indices, bev_pool_mask)
 from .semantic_diffusion import semantic_depth_diffusion
@@ -32,11 +33,11 @@ def points_to_depth_maps(points: Sequence[Tensor], lidar2img: Tensor,
                          feat_shape: Sequence[int]) -> Tensor:
     """Nearest LiDAR depth of every feature cell of every camera.
 
-    A point projected to pixel (u, v) (pixel i covers [i, i + 1), see
-    :mod:`projects.occ_common.models.layers.camera_geometry`) falls in
-    feature cell ``(floor(v / s_y), floor(u / s_x))`` with the strides
-    ``s = img / feat``; the cell keeps its nearest return, the surface the
-    camera sees.
+    :func:`~projects.occ_common.geometry.depth.nearest_depth_map` at
+    feature resolution, per sample: a point projected to pixel (u, v) falls
+    in cell ``(floor(v / s_y), floor(u / s_x))`` with the strides
+    ``s = img / feat``, and the cell keeps its nearest return, the surface
+    the camera sees.
 
     Args:
         points (Sequence[Tensor]): Per sample, (x, y, z, ...) in the working
@@ -49,31 +50,18 @@ def points_to_depth_maps(points: Sequence[Tensor], lidar2img: Tensor,
     Returns:
         Tensor: Depth, 0 where no return. Shape (B * N, h, w).
     """
-    batch, num_cams = lidar2img.shape[:2]
-    if len(points) != batch:
+    if len(points) != lidar2img.shape[0]:
         raise ValueError(f'points_to_depth_maps got {len(points)} point '
-                         f'clouds for a batch of {batch} camera sets')
-    img_h, img_w = (int(v) for v in img_shape)
-    feat_h, feat_w = (int(v) for v in feat_shape)
-    depth = lidar2img.new_full((batch * num_cams * feat_h * feat_w, ),
-                               float('inf'))
+                         f'clouds for a batch of {lidar2img.shape[0]} '
+                         'camera sets')
+    maps = []
     for b, pts in enumerate(points):
         if pts.dim() != 2 or pts.shape[1] < 3:
             raise ValueError(f'points of sample {b} must be (P, C >= 3), '
                              f'got {tuple(pts.shape)}')
-        if pts.shape[0] == 0:
-            continue
-        uv, dist = project_points(pts[:, :3].to(lidar2img), lidar2img[b])
-        col = torch.floor(uv[..., 0] * (feat_w / img_w)).long()
-        row = torch.floor(uv[..., 1] * (feat_h / img_h)).long()
-        inside = ((dist > 0) & (col >= 0) & (col < feat_w) & (row >= 0)
-                  & (row < feat_h))
-        cam = torch.arange(num_cams, device=pts.device).view(-1, 1)
-        cell = ((b * num_cams + cam) * feat_h + row) * feat_w + col
-        depth.scatter_reduce_(
-            0, cell[inside], dist[inside], reduce='amin', include_self=True)
-    depth = torch.where(torch.isinf(depth), torch.zeros_like(depth), depth)
-    return depth.view(batch * num_cams, feat_h, feat_w)
+        maps.append(
+            nearest_depth_map(pts, lidar2img[b], img_shape, feat_shape))
+    return torch.cat(maps, dim=0)
 
 
 @MODELS.register_module()

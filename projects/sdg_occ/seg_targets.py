@@ -3,9 +3,9 @@
 The 2D semantic maps of SDG-OCC come from lidarseg labels projected into
 the images, so they are as sparse as the LiDAR depth. Downsampling them to
 the 1/16 feature map the way BEVDepth downsamples depth (nearest return of
-each patch, see ``patch_min_depth``) keeps the label of the surface the
-camera sees in each patch; nearest-neighbour resampling would instead drop
-most labels.
+each patch, see :func:`projects.occ_common.geometry.depth.patch_min_depth`)
+keeps the label of the surface the camera sees in each patch;
+nearest-neighbour resampling would instead drop most labels.
 """
 from typing import Optional
 

@@ -6,8 +6,8 @@ depths evenly spaced over [d - r, d + r], and each virtual point is weighted
 by the predicted depth distribution linearly interpolated at its depth, so
 that only a few points per pixel are lifted instead of all D depth bins.
 
-Depth-bin convention: that of :mod:`projects.occ_common.models.layers.
-camera_geometry` (BEVDepth): ``depth_bound = (dmin, dmax, step)`` gives
+Depth-bin convention: that of :mod:`projects.occ_common.geometry.depth`
+(BEVDepth): ``depth_bound = (dmin, dmax, step)`` gives
 D = round((dmax - dmin) / step) bins, lifted at ``dmin + k * step``. The
 interpolation nodes are these same depths, so a virtual point that falls on
 a bin depth gets exactly the weight the plain LSS lift gives that bin.
@@ -17,7 +17,7 @@ from typing import Sequence, Tuple
 import torch
 from torch import Tensor
 
-from projects.occ_common.models.losses.depth_bce_loss import num_depth_bins
+from projects.occ_common.geometry.depth import num_depth_bins
 
 
 def virtual_point_depths(ext_depth: Tensor, radius: float,

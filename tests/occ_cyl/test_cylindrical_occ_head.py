@@ -4,23 +4,24 @@ import math
 import pytest
 import torch
 
-from projects.occ_cyl import CylindricalOccHead
+from projects.occ_cyl import CylinderGrid, CylindricalOccHead
 from projects.occ_cyl.cylindrical_occ_head import sample_plane, voxel_centres
 
 PI = math.pi
 PC_RANGE = (-4.0, -4.0, -1.0, 4.0, 4.0, 1.0)
-CYL = dict(grid_shape=(4, 8, 2),
-           cyl_range=(0.0, -PI, -1.0, 4 * math.sqrt(2) + 0.01, PI, 1.0))
+# 8 m / 2 m = 4 x-y cells, 2 m / 1 m = 2 z cells; the cylinder's radius
+# reaches the corners at 4 sqrt(2) m.
+VOXEL = (2.0, 2.0, 1.0)
+CYLINDER = CylinderGrid.covering(PC_RANGE, (4, 8, 2))
 LOSS = dict(
     type='MultiScaleOccupancyLoss',
-    num_scales=2,
     losses=[dict(type='OccFocalLoss'), dict(type='OccLovaszLoss')])
 
 
 def _head(**kwargs):
     torch.manual_seed(0)
-    cfg = dict(CYL, in_channels=3, pc_range=PC_RANGE,
-               scale_shapes=[(4, 4, 2), (2, 2, 1)], hidden_channels=5,
+    cfg = dict(in_channels=3, cylinder=CYLINDER, point_cloud_range=PC_RANGE,
+               voxel_size=VOXEL, num_scales=2, hidden_channels=5,
                num_classes=4, loss_occ=LOSS)
     cfg.update(kwargs)
     return CylindricalOccHead(**cfg)
@@ -41,6 +42,16 @@ def test_sample_plane_wraps_the_azimuth():
     column = plane.view(1, 1, 4, 1)
     wrapped_h = sample_plane(column, coords[:, [1, 0]], True, False)
     torch.testing.assert_close(wrapped_h, wrapped)
+
+
+def test_scale_shapes_and_loss_labels_come_from_the_head():
+    """(8, 8, 2) m over (2, 2, 1) m voxels = (4, 4, 2) at scale 0, halved to
+    (2, 2, 1) at scale 1; the loss gets num_scales 2 and the labels."""
+    head = _head(empty_index=3, ignore_index=7)
+    assert head.scale_shapes == [(4, 4, 2), (2, 2, 1)]
+    assert head.loss_occ.num_scales == 2
+    assert (head.loss_occ.empty_index, head.loss_occ.ignore_index) == (3, 7)
+    assert head.loss_occ.losses[0].ignore_index == 7
 
 
 def test_voxel_centres():
@@ -98,6 +109,7 @@ def test_loss_and_backward_with_an_all_ignored_sample():
 def test_cylinder_must_cover_the_grid():
     """A cylinder of radius 5 < 4 sqrt(2) = 5.66 misses the grid corners."""
     with pytest.raises(ValueError, match='does not cover'):
-        _head(cyl_range=(0.0, -PI, -1.0, 5.0, PI, 1.0))
+        _head(cylinder=CylinderGrid((4, 8, 2), (0.0, -PI, -1.0, 5.0, PI,
+                                                1.0)))
     with pytest.raises(ValueError, match='2 output scales'):
         _head()([()])

@@ -4,17 +4,17 @@ import math
 import pytest
 import torch
 
-from projects.occ_cyl import TPVPolarFusion
+from projects.occ_cyl import CylinderGrid, TPVPolarFusion
 
 PI = math.pi
 # dr = 1 m, dtheta = pi / 2, dz = 1 m: voxel (i, j, k) of (r, theta, z).
-GRID = dict(grid_shape=(4, 4, 2), cyl_range=(0.0, -PI, -1.0, 4.0, PI, 1.0))
+CYLINDER = CylinderGrid((4, 4, 2), (0.0, -PI, -1.0, 4.0, PI, 1.0))
 
 
 def _fusion(**kwargs):
     torch.manual_seed(0)
-    cfg = dict(GRID, cam_channels=2, lidar_channels=3, plane_channels=4,
-               num_groups=2)
+    cfg = dict(cylinder=CYLINDER, cam_channels=2, lidar_channels=3,
+               plane_channels=4, num_groups=2)
     cfg.update(kwargs)
     return TPVPolarFusion(**cfg)
 

@@ -35,25 +35,24 @@ def _head(**kwargs):
         in_channels=4, num_classes=3, dz=2, mid_channels=8, **kwargs)
 
 
-def test_loss_camera_mask_and_backward():
-    """Masked voxels are ignored: with the whole camera mask off the CE is
-    a connected zero, and with it on the loss is positive and
-    back-propagates into the head."""
+def test_loss_suffix_ignore_and_backward():
+    """All labels ignored (255): the CE is a connected zero; with labels the
+    loss is positive, its key carries the suffix and it back-propagates
+    into the head."""
     head = _head()
     x = torch.randn(2, 4, 3, 5, requires_grad=True)  # Y = 3, X = 5
     gt = torch.randint(0, 3, (2, 5, 3, 2))
-    off = head.loss(x, gt, torch.zeros(2, 5, 3, 2, dtype=torch.bool))
+    off = head.loss(x, torch.full_like(gt, 255))
     assert list(off) == ['loss_focal'] and off['loss_focal'].item() == 0.0
-    on = head.loss(x, gt, torch.ones(2, 5, 3, 2, dtype=torch.bool),
-                   prefix='_teacher')
+    on = head.loss(x, gt, suffix='_teacher')
     assert on['loss_focal_teacher'] > 0
     on['loss_focal_teacher'].backward()
     assert x.grad.abs().sum() > 0
 
 
-def test_loss_equals_cross_entropy_without_mask():
+def test_loss_equals_cross_entropy():
     """gamma = 0 focal loss = mean CE over non-ignored voxels (255)."""
-    head = _head(use_camera_mask=False)
+    head = _head()
     x = torch.randn(1, 4, 3, 5)
     gt = torch.randint(0, 3, (1, 5, 3, 2))
     gt[0, 0] = 255
@@ -62,15 +61,21 @@ def test_loss_equals_cross_entropy_without_mask():
     assert torch.isclose(head.loss(x, gt)['loss_focal'], ref, atol=1e-6)
 
 
-def test_extra_losses_and_predict():
-    head = _head(losses=[
-        dict(type='OccFocalLoss', gamma=2.0),
-        dict(type='OccLovaszLoss'),
-        dict(type='SceneClassAffinityLoss', mode='geo', empty_index=2)
-    ])
+def _loss_occ(*losses):
+    return dict(type='OccupancyLoss', losses=list(losses))
+
+
+def test_extra_losses_labels_and_predict():
+    """The head hands empty_index 2 to the SCAL term; one key per term."""
+    head = _head(
+        loss_occ=_loss_occ(
+            dict(type='OccFocalLoss', gamma=2.0), dict(type='OccLovaszLoss'),
+            dict(type='SceneClassAffinityLoss', mode='geo')),
+        empty_index=2)
+    assert head.loss_occ.losses[2].empty_index == 2
     x = torch.randn(1, 4, 3, 5)
     gt = torch.randint(0, 3, (1, 5, 3, 2))
-    losses = head.loss(x, gt, torch.ones_like(gt, dtype=torch.bool))
+    losses = head.loss(x, gt)
     assert set(losses) == {'loss_focal', 'loss_lovasz', 'loss_geo_scal'}
     pred = head.predict(x)
     assert pred.shape == (1, 5, 3, 2) and pred.dtype == torch.long
@@ -82,9 +87,11 @@ def test_bad_inputs_raise():
     x = torch.randn(1, 4, 3, 5)
     with pytest.raises(ValueError, match='gt_occ must have shape'):
         head.loss(x, torch.zeros(1, 3, 5, 2, dtype=torch.long))
-    with pytest.raises(ValueError, match='mask_camera'):
-        head.loss(x, torch.zeros(1, 5, 3, 2, dtype=torch.long))
     with pytest.raises(ValueError, match='distinct'):
-        _head(losses=[dict(type='OccFocalLoss'), dict(type='OccFocalLoss')])
+        _head(loss_occ=_loss_occ(
+            dict(type='OccFocalLoss'), dict(type='OccFocalLoss')))
+    with pytest.raises(ValueError, match='has empty_index=1'):
+        _head(loss_occ=_loss_occ(
+            dict(type='SceneClassAffinityLoss', empty_index=1)))
     with pytest.raises(ValueError, match='channels_to_height'):
         channels_to_height(torch.zeros(1, 5, 2, 2), 3, 2)

@@ -1,24 +1,62 @@
-"""Every SDG-OCC config builds; the tiny ones train and test end to end."""
+"""The SDG-OCC configs are deltas that state each fact once.
+
+test_all_configs.py builds every config and compares its model with the
+committed fingerprint; test_tiny_configs.py trains the tiny ones.
+"""
 import glob
 import os.path as osp
 import re
 
 import pytest
-from mmdet3d.registry import MODELS
 from mmengine.config import Config
-from mmengine.registry import init_default_scope
 
-from projects.occ_common.testing.tool_logs import (last_test_metrics,
-                                                   make_converted_world,
-                                                   mean_of_class_ious,
-                                                   run_tool, train_losses)
-from projects.sdg_occ import SDGOcc
+from projects.occ_common.testing.config_delta import (coupled_value_mismatches,
+                                                      model_delta)
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIG_DIR = osp.join(ROOT, 'configs', 'sdg_occ')
+MODEL_BASE = osp.join(CONFIG_DIR, '_base_', 'sdgocc-fusion_r50.py')
 MAIN = sorted(glob.glob(osp.join(CONFIG_DIR, '*.py')))
 ABLATIONS = sorted(glob.glob(osp.join(CONFIG_DIR, 'ablations', '*.py')))
 TINY = [path for path in MAIN if '_tiny_' in path]
+
+
+def _main(variant, dataset):
+    return osp.join(CONFIG_DIR, f'sdgocc-{variant}_r50_4xb2-24e_{dataset}.py')
+
+
+FUSION = _main('fusion', 'occ3d-nus')
+KL = _main('kl', 'occ3d-nus')
+FUSION_SOCC = _main('fusion', 'surroundocc-nus')
+#: What each config changes in the model of the config it builds on.
+COUPLED = {
+    'point_cloud_range', 'voxel_size', 'num_classes', 'empty_index',
+    'depth_bound'
+}
+KL_KEYS = {
+    'variant', 'loss_distill.type', 'loss_distill.alpha',
+    'loss_distill.beta', 'loss_distill.loss_weight', 'teacher_loss_weight'
+}
+DELTAS = {
+    FUSION: (MODEL_BASE, COUPLED | {'loss_mask_key'}),
+    # SurroundOcc: a LiDAR voxel that divides the 0.5 m cell and the SCAL
+    # terms (no camera mask).
+    FUSION_SOCC: (MODEL_BASE, COUPLED | {
+        'lidar_encoder.voxel_size', 'occ_head.loss_occ.losses[1].type',
+        'occ_head.loss_occ.losses[1].mode',
+        'occ_head.loss_occ.losses[2].type', 'occ_head.loss_occ.losses[2].mode'
+    }),
+    KL: (FUSION, KL_KEYS),
+    _main('kl', 'surroundocc-nus'): (FUSION_SOCC, KL_KEYS),
+    TINY[1]: (TINY[0], KL_KEYS),
+    # Table 3 (LSS baseline, FOAD only), 4 (r x layers) and 5 (k).
+    'sdgocc-fusion-lss': (FUSION, {'view_transform.use_sdg'}),
+    'sdgocc-kl-lss': (KL, {'view_transform.use_sdg'}),
+}
+
+
+def _name(path):
+    return osp.basename(path).split('_')[0] if '/ablations/' in path else path
 
 
 def test_config_inventory():
@@ -28,40 +66,54 @@ def test_config_inventory():
     names = {osp.basename(p) for p in MAIN}
     for variant in ('fusion', 'kl'):
         for dataset in ('occ3d-nus', 'surroundocc-nus'):
-            assert f'sdgocc-{variant}_r50_4xb2-24e_{dataset}.py' in names
+            assert osp.basename(_main(variant, dataset)) in names
         assert (f'sdgocc-{variant}_tiny_1xb1-6e_occ3d-nus-synthetic.py'
                 in names)
     assert len(ABLATIONS) == 12
 
 
 @pytest.mark.parametrize(
-    'path', MAIN + ABLATIONS, ids=lambda p: osp.basename(p)[:-3])
-def test_config_loads_with_imports(path):
+    'path', [p for p in MAIN if p not in TINY[:1]] + ABLATIONS,
+    ids=lambda p: osp.basename(p)[:-3])
+def test_each_delta_changes_only_its_documented_keys(path):
+    """Compared with the config it builds on, a config changes exactly the
+    model keys listed in DELTAS; Tables 4 and 5 one knob each (r and the
+    layers, k), the paper's own values (r = 1, 8 layers; k = 7) none."""
+    name = _name(path)
+    if name in DELTAS:
+        parent, keys = DELTAS[name]
+    elif match := re.search(r'-r(\d)l(\d+)$', name):
+        parent = FUSION
+        keys = {
+            key
+            for key, changed in (('view_transform.layer_radius',
+                                  match[1] != '1'),
+                                 ('view_transform.num_layers',
+                                  match[2] != '8')) if changed
+        }
+    else:
+        assert re.search(r'-k\d$', name), name
+        parent = FUSION
+        keys = set() if name.endswith('7') else {'fusion.kernel_size'}
+    assert model_delta(parent, path) == keys
+
+
+@pytest.mark.parametrize('path', MAIN, ids=lambda p: osp.basename(p)[:-3])
+def test_coupled_values_come_from_the_dataset_base(path):
+    """The model's grid, classes and empty label are the dataset base's;
+    Occ3D supervises the camera-visible voxels, as its metric counts
+    them."""
     cfg = Config.fromfile(path)
-    assert cfg.custom_imports == dict(
-        imports=['projects.occ_common', 'projects.sdg_occ'],
-        allow_failed_imports=False)
+    assert coupled_value_mismatches(cfg, 'sdg_occ') == []
     model = cfg.model
     assert model.type == 'SDGOcc'
     assert model.variant == ('kl' if 'sdgocc-kl' in path else 'fusion')
-    # The coupled grid values reach every module that needs them.
-    grid = [
-        round((cfg.point_cloud_range[i + 3] - cfg.point_cloud_range[i]) /
-              cfg.voxel_size[i]) for i in range(3)
-    ]
-    assert list(model.view_transform.bev_shape) == [grid[1], grid[0]]
-    assert list(model.lidar_encoder.bev_shape) == [grid[1], grid[0]]
-    assert model.occ_head.dz == grid[2]
-    assert model.occ_head.num_classes == len(cfg.class_names)
     assert model.fusion.out_channels == model.depth_net.context_channels
-    assert model.depth_loss.loss_weight == 0.05
-    if 'occ3d' in path:
-        assert cfg.val_evaluator.use_camera_mask
-        assert model.occ_head.use_camera_mask
+    assert model.loss_depth.loss_weight == 0.05
 
 
-def test_ablation_deltas():
-    """Each ablation file changes exactly the knob its name says."""
+def test_ablation_knobs():
+    """Each ablation file sets the value its name says."""
     for path in ABLATIONS:
         name = osp.basename(path)
         model = Config.fromfile(path).model
@@ -73,52 +125,3 @@ def test_ablation_deltas():
         else:
             assert '-lss_' in name
             assert model.view_transform.use_sdg is False
-
-
-@pytest.mark.parametrize('path', MAIN, ids=lambda p: osp.basename(p)[:-3])
-def test_model_builds(path):
-    cfg = Config.fromfile(path)
-    init_default_scope(cfg.default_scope)  # as the Runner does
-    model = MODELS.build(cfg.model)
-    assert isinstance(model, SDGOcc)
-    assert model.variant == cfg.model.variant
-
-
-# ---------------------------------------------------------------------------
-# End to end: tools/train.py and tools/test.py on a synthetic world.
-# ---------------------------------------------------------------------------
-@pytest.fixture(scope='module')
-def synthetic_root(tmp_path_factory):
-    """Two scenes of two key frames (one for training, one for val)."""
-    root = str(tmp_path_factory.mktemp('sdg') / 'synthetic_nuscenes')
-    return make_converted_world(
-        root, scenes=2, samples=2, sweeps=1, image_size=(352, 198))
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize('path', TINY, ids=lambda p: osp.basename(p)[:-3])
-def test_tiny_config_trains_and_tests(path, synthetic_root, tmp_path):
-    """Loss falls over 4 epochs of 2 samples and test.py reports a mIoU."""
-    data = [
-        f'{split}_dataloader.dataset.data_root={synthetic_root}'
-        for split in ('train', 'val', 'test')
-    ]
-    work_dir = str(tmp_path / 'work')
-    proc = run_tool('train.py', path, '--work-dir', work_dir, '--cfg-options',
-                    'train_cfg.max_epochs=4', 'train_cfg.val_interval=4',
-                    'default_hooks.checkpoint.interval=4', *data)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    losses = train_losses(work_dir)
-    assert len(losses) == 8
-    assert sum(losses[-2:]) < sum(losses[:2])
-    proc = run_tool('test.py', path, osp.join(work_dir,
-                                              'epoch_4.pth'), '--work-dir',
-                    str(tmp_path / 'test'), '--cfg-options', *data)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    metrics = last_test_metrics(str(tmp_path / 'test'))
-    # Occ3D: mIoU is the mean over classes 0..16 (not 'free') present in
-    # the camera-masked GT or prediction.
-    names = Config.fromfile(path).class_names[:-1]
-    assert metrics['occ/mIoU'] == pytest.approx(
-        mean_of_class_ious(metrics, names), abs=1e-3)
-    assert 0.0 < metrics['occ/IoU'] < 100.0

@@ -11,7 +11,6 @@ from projects.occ_common.testing.occ_inputs import make_occ_batch
 from projects.sdg_occ import SDGOcc  # noqa: F401 (registers the model)
 
 PC_RANGE = (-8.0, -8.0, -2.0, 8.0, 8.0, 2.0)
-BEV_SHAPE = (8, 8)
 DEPTH_BOUND = (1.0, 9.0, 1.0)
 NUM_CLASSES = 4
 CAM_CHANNELS = 6
@@ -21,6 +20,11 @@ def _cfg(variant):
     return dict(
         type='SDGOcc',
         variant=variant,
+        point_cloud_range=PC_RANGE,
+        voxel_size=(2.0, 2.0, 1.0),  # 8 x 8 x 4 voxels
+        num_classes=NUM_CLASSES,
+        depth_bound=DEPTH_BOUND,
+        loss_mask_key='mask_camera',
         img_backbone=dict(
             type='mmdet.ResNet',
             depth=18,
@@ -36,26 +40,20 @@ def _cfg(variant):
             in_channels=8,
             mid_channels=8,
             context_channels=CAM_CHANNELS,
-            num_depth_bins=8,
             seg_channels=3,
             num_res_blocks=1,
             aspp_dilations=()),
         view_transform=dict(
             type='SDGViewTransform',
-            point_cloud_range=PC_RANGE,
-            bev_shape=BEV_SHAPE,
-            depth_bound=DEPTH_BOUND,
             diffusion_radius=1.0,
             num_layers=4),
         lidar_encoder=dict(
             type='SPVCNNEncoder',
             in_channels=4,
             voxel_size=(0.5, 0.5, 0.5),
-            point_cloud_range=PC_RANGE,
             base_channels=4,
             stage_channels=(8, 8),
             stage_strides=(2, 2),
-            bev_shape=BEV_SHAPE,
             out_channels=8,
             backend='torch'),
         fusion=dict(
@@ -75,14 +73,10 @@ def _cfg(variant):
         occ_head=dict(
             type='ChannelToHeightHead',
             in_channels=8,
-            num_classes=NUM_CLASSES,
-            dz=4,
             mid_channels=8),
-        distill_loss=dict(type='FOADDistillLoss', alpha=1.0, beta=0.5),
-        depth_loss=dict(
-            type='DepthBCELoss', depth_bound=DEPTH_BOUND, downsample=16,
-            loss_weight=0.05),
-        seg_loss=dict(
+        loss_distill=dict(type='FOADDistillLoss', alpha=1.0, beta=0.5),
+        loss_depth=dict(type='DepthBCELoss', downsample=16, loss_weight=0.05),
+        loss_seg=dict(
             type='mmdet.CrossEntropyLoss',
             ignore_index=255,
             avg_non_ignore=True,
@@ -206,8 +200,8 @@ def test_all_ignored_targets_and_no_points():
 
 def test_bad_config_and_inputs_raise():
     cfg = _cfg('kl')
-    cfg.pop('distill_loss')
-    with pytest.raises(ValueError, match='distill_loss'):
+    cfg.pop('loss_distill')
+    with pytest.raises(ValueError, match='loss_distill'):
         MODELS.build(cfg)
     with pytest.raises(ValueError, match='variant'):
         MODELS.build(_cfg('camera'))
@@ -218,3 +212,35 @@ def test_bad_config_and_inputs_raise():
     del samples[1].gt_seg_2d
     with pytest.raises(ValueError, match="data sample 1 has no 'gt_seg_2d'"):
         model.loss(inputs, samples)
+
+
+def test_detector_hands_its_grid_and_bins_to_the_children():
+    """(-8, 8)^2 at 2 m is an 8 x 8 BEV (Y, X) for the view transform and
+    the LiDAR encoder, 4 m at 1 m gives the head dz = 4; the depth bins
+    (1, 9, 1) give DepthNet 8 bins; a child set otherwise is refused."""
+    model = _model('fusion')
+    assert model.view_transform.bev_shape == (8, 8)
+    assert model.lidar_encoder.bev_shape == (8, 8)
+    assert model.view_transform.point_cloud_range == PC_RANGE
+    assert model.occ_head.dz == 4
+    assert model.depth_net.num_depth_bins == 8
+    assert model.view_transform.depth_bound == DEPTH_BOUND
+    cfg = _cfg('fusion')
+    cfg['view_transform']['bev_shape'] = (4, 4)
+    with pytest.raises(ValueError, match='has bev_shape=\\(4, 4\\)'):
+        MODELS.build(cfg)
+
+
+def test_loss_mask_key_ignores_voxels_outside_the_camera_mask():
+    """With an all-False camera mask no voxel is supervised: the focal
+    term is exactly 0; without loss_mask_key the same batch is supervised."""
+    inputs, samples = _batch()
+    for sample in samples:
+        sample.mask_camera[:] = False
+    masked = _model('fusion').train()(inputs, samples, mode='loss')
+    assert masked['loss_focal'].item() == 0.0
+    cfg = _cfg('fusion')
+    cfg.pop('loss_mask_key')
+    torch.manual_seed(0)
+    unmasked = MODELS.build(cfg).train()(inputs, samples, mode='loss')
+    assert unmasked['loss_focal'].item() > 0.0

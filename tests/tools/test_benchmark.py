@@ -1,22 +1,18 @@
 """tools/benchmark.py on the toy config: keys, counts and ratios."""
-import importlib.util
 import json
 import os.path as osp
 
 import numpy as np
 import pytest
 
+from projects.occ_common.testing.tool_logs import load_tool
+
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ.py')
 
 
 def _tool():
-    """tools/benchmark.py as a module."""
-    spec = importlib.util.spec_from_file_location(
-        'benchmark_tool', osp.join(ROOT, 'tools', 'benchmark.py'))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_tool('benchmark.py')
 
 
 def test_single_model_json(tmp_path, capsys):

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import torch
 
-from projects.occ_common.testing.tool_logs import last_test_metrics
+from projects.occ_common.testing.tool_logs import last_test_metrics, load_tool
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ.py')
@@ -90,11 +90,7 @@ def test_train_resume_and_test(tmp_path):
 
 def test_resume_from_explicit_checkpoint_path(tmp_path):
     """``--resume PATH`` sets ``resume=True`` and ``load_from=PATH``."""
-    sys.path.insert(0, osp.join(ROOT, 'tools'))
-    try:
-        import train
-    finally:
-        sys.path.pop(0)
+    train = load_tool('train.py')
     args = train.parse_args([CONFIG, '--resume', 'some/ckpt.pth'])
     cfg = train.build_cfg(args)
     assert (cfg.resume, cfg.load_from) == (True, 'some/ckpt.pth')

@@ -1,6 +1,5 @@
 """tools/visualize_occ.py and tools/test.py --show-dir on the toy config."""
 import glob
-import importlib.util
 import os.path as osp
 import subprocess
 import sys
@@ -10,17 +9,10 @@ import pytest
 import torch
 from PIL import Image
 
+from projects.occ_common.testing.tool_logs import load_tool
+
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ.py')
-
-
-def _tool():
-    """tools/visualize_occ.py as a module."""
-    spec = importlib.util.spec_from_file_location(
-        'visualize_occ_tool', osp.join(ROOT, 'tools', 'visualize_occ.py'))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _toy_checkpoint(path):
@@ -45,7 +37,7 @@ def test_from_saved_npz_and_npy(tmp_path):
     pred[0, 0, 0] = 0
     np.savez(tmp_path / 's.npz', pred_occ=pred, gt_occ=gt)
     np.save(tmp_path / 'p.npy', pred)
-    tool = _tool()
+    tool = load_tool('visualize_occ.py')
     both = tool.main(['--pred', str(tmp_path / 's.npz'), '--out',
                       str(tmp_path / 'both.png'), '--view-size', '40', '60'])
     alone = tool.main(['--pred', str(tmp_path / 'p.npy'), '--out',
@@ -56,7 +48,7 @@ def test_from_saved_npz_and_npy(tmp_path):
 
 def test_sparse_surroundocc_and_occ3d_labels(tmp_path):
     """(N, 4) rows become a dense grid; Occ3D 'semantics' is the GT."""
-    tool = _tool()
+    tool = load_tool('visualize_occ.py')
     rows = np.array([[0, 0, 0, 4], [7, 7, 3, 16]])
     dense = tool.sparse_to_dense(rows, (8, 8, 4), 'x.npy')
     assert dense[0, 0, 0] == 4 and dense[7, 7, 3] == 16
@@ -83,7 +75,7 @@ def test_from_config_checkpoint_and_index(tmp_path):
     1x1x1 convolution applied to that sample's features.
     """
     model = _toy_checkpoint(tmp_path / 'toy.pth')
-    tool = _tool()
+    tool = load_tool('visualize_occ.py')
     tool.main(['--config', CONFIG, '--checkpoint', str(tmp_path / 'toy.pth'),
                '--index', '2', '--out', str(tmp_path / 'two.png'),
                '--save-pred', str(tmp_path / 'two.npz'), '--view-size', '40',

@@ -6,9 +6,9 @@
 _base_ = ['./occ3d-nus.py']
 
 data_root = 'data/nuscenes_synthetic/'
-
-train_dataloader = dict(
-    num_workers=2, dataset=dict(data_root=data_root))
-val_dataloader = dict(
-    num_workers=2, dataset=dict(data_root=data_root))
+# Worker processes only add start-up time on a world of a few samples.
+_loader = dict(
+    num_workers=0, persistent_workers=False, dataset=dict(data_root=data_root))
+train_dataloader = _loader
+val_dataloader = _loader
 test_dataloader = val_dataloader

@@ -2,8 +2,4 @@
 # eq. 5 without CNN2(V_coord): V_context = V + CNN1(V_depth).
 _base_ = ['../occcyl_r50-swint_3xb1-24e_surroundocc-nus.py']
 
-custom_imports = dict(
-    imports=['projects.occ_common', 'projects.occ_cyl'],
-    allow_failed_imports=False)
-
 model = dict(depth_net=dict(position_channels=0))

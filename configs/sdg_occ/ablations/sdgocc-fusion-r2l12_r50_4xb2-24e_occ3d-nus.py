@@ -2,8 +2,4 @@
 # 12 layers.
 _base_ = ['../sdgocc-fusion_r50_4xb2-24e_occ3d-nus.py']
 
-custom_imports = dict(
-    imports=['projects.occ_common', 'projects.sdg_occ'],
-    allow_failed_imports=False)
-
 model = dict(view_transform=dict(layer_radius=2.0, num_layers=12))

@@ -128,13 +128,13 @@ class OccupancyMetric(BaseMetric):
         self.subsets = tuple(subsets or ())
         self.ignore_index = ignore_index
         self.distance_ranges = self._check_ranges(distance_ranges)
-        self._grid_shape: Optional[Tuple[int, int, int]] = None
+        self._occ_shape: Optional[Tuple[int, int, int]] = None
         self._range_masks: Dict[str, torch.Tensor] = {}
         if self.distance_ranges:
             if voxel_size is None or point_cloud_range is None:
                 raise ValueError('OccupancyMetric: distance_ranges needs '
                                  'voxel_size and point_cloud_range.')
-            dist, self._grid_shape = self._horizontal_distance(
+            dist, self._occ_shape = self._horizontal_distance(
                 voxel_size, point_cloud_range)
             # One (X, Y) column mask per range, built once; copies per
             # device are cached by _column_masks.
@@ -238,11 +238,11 @@ class OccupancyMetric(BaseMetric):
             result['subsets'] = tuple(
                 s for s in self.subsets if self._flag(sample, s, name))
         if self.distance_ranges:
-            if tuple(gt.shape) != self._grid_shape:
+            if tuple(gt.shape) != self._occ_shape:
                 raise ValueError(
                     f'OccupancyMetric: sample {name}: grid '
                     f'{tuple(gt.shape)} does not match point_cloud_range / '
-                    f'voxel_size {self._grid_shape}.')
+                    f'voxel_size {self._occ_shape}.')
             result['distance_confusion'] = np.stack([
                 self._confusion(gt, pred, counted & in_range)
                 for in_range in self._column_masks(gt.device)

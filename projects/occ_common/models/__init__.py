@@ -1,4 +1,5 @@
-"""Models shared by the occupancy plugins: losses, layers, sparse backend."""
-from . import layers, losses, sparse
+"""Models shared by the occupancy plugins: the base detector, losses,
+layers and the sparse backend."""
+from . import detectors, layers, losses, sparse
 
-__all__ = ['layers', 'losses', 'sparse']
+__all__ = ['detectors', 'layers', 'losses', 'sparse']

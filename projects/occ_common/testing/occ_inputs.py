@@ -11,6 +11,27 @@ from typing import List, Sequence, Tuple
 import torch
 from torch import Tensor
 
+#: Depth bins of :func:`patch_depth_map`: D = 4 bins [1, 2) [2, 3) [3, 4)
+#: [4, 5) m.
+PATCH_DEPTH_BOUND = (1.0, 5.0, 1.0)
+
+
+def patch_depth_map() -> Tensor:
+    """A (1, 4, 4) LiDAR depth map of 2 x 2 patches, 0 = no return.
+
+    With :data:`PATCH_DEPTH_BOUND`:
+
+    * top-left     (0, 3.5, 0, 2.2): nearest 2.2 -> bin 1
+    * top-right    all 0: no return
+    * bottom-left  (7, 6, 0, 0): nearest 6 >= 5 -> dropped
+    * bottom-right (1.0, 4.9, 3, 0): nearest 1.0 -> bin 0
+
+    Returns:
+        Tensor: Shape (1, 4, 4).
+    """
+    return torch.tensor([[[0.0, 3.5, 0.0, 0.0], [0.0, 2.2, 0.0, 0.0],
+                          [7.0, 6.0, 1.0, 4.9], [0.0, 0.0, 3.0, 0.0]]])
+
 
 def ring_camera_rig(num_cams: int,
                     img_shape: Sequence[int],
@@ -56,7 +77,7 @@ def sparse_depth_maps(points: Tensor, lidar2img: Tensor,
     Pixel ``i`` covers ``[i, i + 1)``, as in the data pipeline.
 
     Args:
-        points (Tensor): LiDAR-frame points. Shape (P, >=3).
+        points (Tensor): Working-frame points. Shape (P, >=3).
         lidar2img (Tensor): Projections. Shape (N, 4, 4).
         img_shape (Sequence[int]): ``(H, W)``.
 

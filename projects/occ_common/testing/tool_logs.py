@@ -1,10 +1,12 @@
 """Read what tools/test.py logged, for end-to-end tests of the tools."""
 import glob
+import importlib.util
 import json
 import math
 import os.path as osp
 import subprocess
 import sys
+from types import ModuleType
 from typing import Dict, List, Sequence, Tuple
 
 REPO_ROOT = osp.dirname(
@@ -61,15 +63,48 @@ def train_losses(work_dir: str) -> List[float]:
     return [r['loss'] for r in records if 'loss' in r]
 
 
-def run_tool(script: str, *args: str,
-             timeout: float = 900) -> subprocess.CompletedProcess:
-    """Run ``tools/<script>`` with this interpreter from the repo root."""
+def load_tool(script: str) -> ModuleType:
+    """``tools/<script>`` imported as a module (its ``main`` not run).
+
+    Args:
+        script (str): File name in ``tools/``, e.g. ``'benchmark.py'``.
+
+    Returns:
+        ModuleType: The module, named ``tools_<stem>``.
+    """
+    name = 'tools_' + osp.splitext(script)[0]
+    spec = importlib.util.spec_from_file_location(
+        name, osp.join(REPO_ROOT, 'tools', script))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def run_tool(script: str,
+             *args: str,
+             timeout: float = 900,
+             cwd: str = REPO_ROOT) -> subprocess.CompletedProcess:
+    """Run ``tools/<script>`` with this interpreter, from the repo root by
+    default."""
     return subprocess.run([sys.executable,
                            osp.join(REPO_ROOT, 'tools', script), *args],
-                          cwd=REPO_ROOT,
+                          cwd=cwd,
                           capture_output=True,
                           text=True,
                           timeout=timeout)
+
+
+def run_create_data(*argv: str):
+    """``tools/create_data.py nuscenes ARGV`` run in this process.
+
+    Returns:
+        dict[str, str]: Split name -> written info file.
+    """
+    spec = importlib.util.spec_from_file_location(
+        'create_data', osp.join(REPO_ROOT, 'tools', 'create_data.py'))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.main(['nuscenes', *argv])
 
 
 def make_converted_world(root: str, scenes: int, samples: int, sweeps: int,

@@ -24,7 +24,7 @@ class ToyOccupancyDataset(BaseDataset):
 
     Args:
         num_samples (int): Number of samples. Defaults to 8.
-        grid_shape (tuple[int]): ``(X, Y, Z)``. Defaults to (8, 8, 4).
+        occ_shape (tuple[int]): ``(X, Y, Z)``. Defaults to (8, 8, 4).
         num_classes (int): Number of classes, 0 = empty. Defaults to 3.
         noise (float): Feature noise. Defaults to 0.5.
         seed (int): Base seed. Defaults to 0.
@@ -34,13 +34,13 @@ class ToyOccupancyDataset(BaseDataset):
 
     def __init__(self,
                  num_samples: int = 8,
-                 grid_shape: Tuple[int, int, int] = (8, 8, 4),
+                 occ_shape: Tuple[int, int, int] = (8, 8, 4),
                  num_classes: int = 3,
                  noise: float = 0.5,
                  seed: int = 0,
                  **kwargs) -> None:
         self.num_samples = num_samples
-        self.grid_shape = tuple(grid_shape)
+        self.occ_shape = tuple(occ_shape)
         self.num_classes = num_classes
         self.noise = noise
         self.seed = seed
@@ -52,7 +52,7 @@ class ToyOccupancyDataset(BaseDataset):
         for idx in range(self.num_samples):
             gen = torch.Generator().manual_seed(self.seed + idx)
             label = torch.randint(
-                0, self.num_classes, self.grid_shape, generator=gen)
+                0, self.num_classes, self.occ_shape, generator=gen)
             feats = nn.functional.one_hot(label, self.num_classes).float()
             feats = feats + self.noise * torch.randn(
                 feats.shape, generator=gen)
@@ -85,6 +85,10 @@ class ToyOccupancyModel(BaseModel):
             iteration NaN (1-based, counting the ``mode='loss'`` calls of
             this process), to test the non-finite loss guard. Defaults to
             None (never).
+        explode_at_iter (int, optional): Make the gradients of this
+            training iteration infinite while its loss stays finite, so
+            that the step explodes the weights (counted as
+            ``nan_at_iter``). Defaults to None (never).
     """
 
     def __init__(self,
@@ -92,11 +96,13 @@ class ToyOccupancyModel(BaseModel):
                  num_classes: int = 3,
                  data_preprocessor: Optional[dict] = None,
                  init_cfg: Optional[dict] = None,
-                 nan_at_iter: Optional[int] = None) -> None:
+                 nan_at_iter: Optional[int] = None,
+                 explode_at_iter: Optional[int] = None) -> None:
         super().__init__(
             data_preprocessor=data_preprocessor, init_cfg=init_cfg)
         self.classifier = nn.Conv3d(in_channels, num_classes, 1)
         self.nan_at_iter = nan_at_iter
+        self.explode_at_iter = explode_at_iter
         self._loss_calls = 0
 
     def forward(self,
@@ -123,6 +129,8 @@ class ToyOccupancyModel(BaseModel):
             self._loss_calls += 1
             if self._loss_calls == self.nan_at_iter:
                 loss = loss * float('nan')
+            if self._loss_calls == self.explode_at_iter:
+                logits.register_hook(lambda grad: grad * float('inf'))
             return dict(loss_ce=loss)
         if mode == 'predict':
             for sample, pred in zip(data_samples, logits.argmax(1)):

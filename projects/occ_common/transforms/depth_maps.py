@@ -2,65 +2,19 @@
 
 Both project the points with the current ``lidar2img`` (which includes the
 image augmentation, see :mod:`.image_aug`), so the maps are aligned with
-the augmented images. Pixel ``i`` covers ``[i, i + 1)``: a point at image
-coordinate ``u`` falls in column ``floor(u)``. Where several points share a
-pixel, the nearest one (smallest depth) wins, as a camera would see it.
+the augmented images. The projection, the pixel convention and the nearest
+point per pixel are those of :mod:`projects.occ_common.geometry.depth`,
+which the models' depth maps and depth bins use too.
 """
-from typing import Optional, Tuple
+from typing import Optional
 
 import numpy as np
 from mmcv.transforms import BaseTransform
 from mmdet3d.registry import TRANSFORMS
 
 from ..datasets.occ_formats import IGNORE_INDEX
+from ..geometry.depth import project_nearest
 from .frames import points_xyz
-
-
-def project_nearest(xyz: np.ndarray,
-                    lidar2img: np.ndarray,
-                    img_shape: Tuple[int, int],
-                    min_depth: float = 1e-3,
-                    max_depth: Optional[float] = None) -> tuple:
-    """Project points into every view and keep the nearest per pixel.
-
-    Args:
-        xyz (np.ndarray): Points in the working frame. Shape (P, 3).
-        lidar2img (np.ndarray): Shape (N, 4, 4).
-        img_shape (tuple[int, int]): (H, W).
-        min_depth (float): Points nearer than this are dropped (behind or
-            on the camera). Defaults to 1e-3.
-        max_depth (float, optional): Points farther are dropped.
-
-    Returns:
-        tuple[np.ndarray, ...]: ``view``, ``row``, ``col`` (int64),
-        ``depth`` (float64) and ``index`` (int64, into ``xyz``) of the
-        winning point of each hit pixel. Shapes (K,).
-    """
-    height, width = img_shape
-    num_views = len(lidar2img)
-    if len(xyz) == 0 or num_views == 0:
-        empty = np.zeros(0, np.int64)
-        return empty, empty, empty, np.zeros(0), empty
-    # (N, 3, 3) @ (3, P) + (N, 3, 1): image-plane coordinates times depth.
-    cam = lidar2img[:, :3, :3] @ xyz.T + lidar2img[:, :3, 3:]
-    depth = cam[:, 2]
-    keep = depth > min_depth
-    if max_depth is not None:
-        keep &= depth < max_depth
-    safe = np.where(keep, depth, 1.0)
-    col = np.floor(cam[:, 0] / safe)
-    row = np.floor(cam[:, 1] / safe)
-    keep &= (col >= 0) & (col < width) & (row >= 0) & (row < height)
-    view, index = np.nonzero(keep)
-    row = row[view, index].astype(np.int64)
-    col = col[view, index].astype(np.int64)
-    depth = depth[view, index]
-    pixel = (view * height + row) * width + col
-    order = np.lexsort((depth, pixel))  # by pixel, then nearest first
-    first = np.ones(len(order), dtype=bool)
-    first[1:] = pixel[order][1:] != pixel[order][:-1]
-    win = order[first]
-    return view[win], row[win], col[win], depth[win], index[win]
 
 
 def _key_frame(results: dict) -> np.ndarray:

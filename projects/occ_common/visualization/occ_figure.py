@@ -4,16 +4,15 @@ Columns are ground truth, prediction and the error map (those given);
 rows are the top-down view (:mod:`.bev_view`) and the 3D view
 (:mod:`.voxel_view`); the camera images with the occupancy projected onto
 them (:mod:`.camera_overlay`) go on top when given. matplotlib draws the
-layout through its Agg canvas, so no display is needed.
+layout through its Agg canvas, so no display is needed; it is imported when
+a figure is drawn, not when the package is imported (registering the
+plugin's modules must not pull in a plotting library).
 """
 import os
 import os.path as osp
 from typing import Dict, Optional, Sequence
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
-from matplotlib.patches import Patch
 from PIL import Image
 
 from .bev_view import render_bev
@@ -132,6 +131,7 @@ def _legend(grids: Dict[str, np.ndarray], palette: np.ndarray,
             class_names: Sequence[str], empty_label: int, ignore_index: int,
             mask, with_errors: bool) -> list:
     """Patches of the classes drawn in any panel, then the error codes."""
+    from matplotlib.patches import Patch
     present = set()
     for key, labels in grids.items():
         drawn = occupied_voxels(labels, len(palette), empty_label,
@@ -153,6 +153,8 @@ def _legend(grids: Dict[str, np.ndarray], palette: np.ndarray,
 def _compose(views: Dict[str, tuple], cameras: Optional[np.ndarray],
              legend: list, heading: str, dpi: int) -> np.ndarray:
     """Lay the rendered views out on one Agg canvas."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
     columns = len(views)
     camera_rows = 0 if cameras is None else -(-len(cameras) //
                                               CAMERAS_PER_ROW)

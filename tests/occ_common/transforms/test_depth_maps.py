@@ -4,8 +4,7 @@ import pytest
 from mmdet3d.structures import LiDARPoints
 
 from projects.occ_common.transforms.depth_maps import (PointsToDepthMaps,
-                                                       PointsToSemanticMaps,
-                                                       project_nearest)
+                                                       PointsToSemanticMaps)
 
 # Camera looking along +z of the working frame, f = 2, principal point
 # (2, 2), 4x4 image: u = 2 x / z + 2, v = 2 y / z + 2.
@@ -28,16 +27,6 @@ def _state(points, views=1):
         points_time_dim=4,
         lidar2img=np.tile(K4, (views, 1, 1)),
         img_shape=(4, 4))
-
-
-def test_project_nearest_by_hand():
-    """Two identical views: each keeps pixel (2, 2) at depth 2 (not 4),
-    (1, 3) at depth 1 and the sweep point's (3, 1) at depth 1."""
-    view, row, col, depth, index = project_nearest(
-        POINTS[:, :3], np.tile(K4, (2, 1, 1)), (4, 4))
-    got = sorted(zip(view, row, col, depth, index))
-    assert got == [(0, 1, 3, 1.0, 2), (0, 2, 2, 2.0, 0), (0, 3, 1, 1.0, 5),
-                   (1, 1, 3, 1.0, 2), (1, 2, 2, 2.0, 0), (1, 3, 1, 1.0, 5)]
 
 
 def test_depth_maps_key_frame_only():

@@ -1,8 +1,10 @@
-"""Layers shared by the occupancy models: DepthNet and camera geometry."""
+"""Layers shared by the occupancy models: DepthNet and camera geometry.
+
+Depth bins and point projection live in :mod:`projects.occ_common.geometry`.
+"""
 from .camera_geometry import (camera_parameter_vector, create_frustum,
-                              cylindrical_position_embedding, depth_bin_values,
-                              frustum_to_lidar, lidar2img_matrix,
-                              project_points)
+                              cylindrical_position_embedding, frustum_to_lidar,
+                              lidar2img_matrix)
 from .cylindrical_coords import (cartesian_to_cylindrical,
                                  cylindrical_to_cartesian)
 from .depth_net import DepthNet
@@ -10,6 +12,5 @@ from .depth_net import DepthNet
 __all__ = [
     'DepthNet', 'camera_parameter_vector', 'cartesian_to_cylindrical',
     'create_frustum', 'cylindrical_position_embedding',
-    'cylindrical_to_cartesian', 'depth_bin_values', 'frustum_to_lidar',
-    'lidar2img_matrix', 'project_points'
+    'cylindrical_to_cartesian', 'frustum_to_lidar', 'lidar2img_matrix'
 ]

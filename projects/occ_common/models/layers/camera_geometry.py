@@ -5,40 +5,29 @@ Conventions (those of mmdet3d 1.x ``lidar2img``):
 * Pixel coordinates are continuous and pixel ``i`` covers ``[i, i + 1)`` (as
   in the depth maps of ``projects.occ_common.transforms``), so a stride-``s``
   feature cell ``j`` is centred on ``(j + 0.5) * s``.
+* Points live in the *working frame* of
+  :mod:`projects.occ_common.transforms.frames` (the LiDAR frame, or the ego
+  frame after ``PointsToEgoFrame`` for Occ3D), called "lidar" in the matrix
+  names as in mmdet3d.
 * All matrices are homogeneous 4x4. ``cam2img`` is the padded intrinsic
   matrix, ``lidar2cam`` the extrinsic and ``img_aug_matrix`` the image
   augmentation; the full projection ``img_aug @ cam2img @ lidar2cam`` maps a
-  LiDAR point ``(x, y, z, 1)`` to ``(u * d, v * d, d, 1)`` where ``(u, v)`` is
-  the augmented pixel and ``d`` the depth along the optical axis. Lifting a
-  pixel at depth ``d`` back to 3D inverts this same matrix, so projection and
-  lifting can never disagree.
-* Depth bins follow :class:`DepthBCELoss` (BEVDepth): ``(min, max, step)``
-  gives ``D = round((max - min) / step)`` bins, bin ``k`` covering
-  ``[min + k * step, min + (k + 1) * step)`` and lifted at its near edge
-  ``min + k * step``. OccCylindrical's 50 bins "from 1 m to 50 m" at
-  d = 1 m are therefore ``(1, 51, 1)``.
+  working-frame point ``(x, y, z, 1)`` to ``(u * d, v * d, d, 1)`` where
+  ``(u, v)`` is the augmented pixel and ``d`` the depth along the optical
+  axis. Lifting a pixel at depth ``d`` back to 3D inverts this same matrix,
+  so projection and lifting can never disagree.
+* Depth bins and point projection are those of
+  :mod:`projects.occ_common.geometry.depth` (BEVDepth's bins, lifted at
+  their near edge ``min + k * step``), shared with the depth loss and the
+  depth-map transforms.
 """
-from typing import Sequence, Tuple
+from typing import Sequence
 
 import torch
 from torch import Tensor
 
-from ..losses.depth_bce_loss import num_depth_bins
+from ...geometry.depth import depth_bin_values
 from .cylindrical_coords import cartesian_to_cylindrical
-
-
-def depth_bin_values(depth_bound: Sequence[float]) -> Tensor:
-    """Depth of every bin, ``min + k * step``.
-
-    Args:
-        depth_bound (Sequence[float]): ``(min, max, step)`` in metres.
-
-    Returns:
-        Tensor: Depths in metres. Shape (D,).
-    """
-    num = num_depth_bins(depth_bound)
-    d_min, step = float(depth_bound[0]), float(depth_bound[2])
-    return d_min + step * torch.arange(num, dtype=torch.float32)
 
 
 def create_frustum(img_shape: Sequence[int], feat_shape: Sequence[int],
@@ -89,14 +78,14 @@ def lidar2img_matrix(cam2img: Tensor, lidar2cam: Tensor,
 
 
 def frustum_to_lidar(frustum: Tensor, lidar2img: Tensor) -> Tensor:
-    """Lift every frustum point ``(u, v, d)`` into the LiDAR frame.
+    """Lift every frustum point ``(u, v, d)`` into the working frame.
 
     Args:
         frustum (Tensor): From :func:`create_frustum`. Shape (D, h, w, 3).
         lidar2img (Tensor): Full projections. Shape (B, N, 4, 4).
 
     Returns:
-        Tensor: LiDAR-frame points. Shape (B, N, D, h, w, 3).
+        Tensor: Working-frame points. Shape (B, N, D, h, w, 3).
     """
     if lidar2img.dim() != 4 or lidar2img.shape[-2:] != (4, 4):
         raise ValueError('lidar2img must be (B, N, 4, 4), got '
@@ -110,38 +99,14 @@ def frustum_to_lidar(frustum: Tensor, lidar2img: Tensor) -> Tensor:
     return pts[..., :3]
 
 
-def project_points(points: Tensor,
-                   lidar2img: Tensor,
-                   eps: float = 1e-5) -> Tuple[Tensor, Tensor]:
-    """Project LiDAR-frame points into every camera.
-
-    Args:
-        points (Tensor): Points. Shape (P, 3).
-        lidar2img (Tensor): Full projections. Shape (N, 4, 4).
-        eps (float): Smallest depth counted as in front of the camera.
-            Defaults to 1e-5.
-
-    Returns:
-        tuple[Tensor, Tensor]: Augmented pixel ``(u, v)``, shape (N, P, 2)
-        (undefined where the depth is not positive), and depth, shape (N, P).
-    """
-    if points.dim() != 2 or points.shape[1] != 3:
-        raise ValueError(f'points must be (P, 3), got {tuple(points.shape)}')
-    homo = torch.cat([points, points.new_ones(points.shape[0], 1)], dim=1)
-    proj = torch.einsum('nij,pj->npi', lidar2img.to(points), homo)
-    depth = proj[..., 2]
-    uv = proj[..., :2] / depth.clamp(min=eps).unsqueeze(-1)
-    return uv, depth
-
-
 def cylindrical_position_embedding(points: Tensor,
                                    cyl_range: Sequence[float]) -> Tensor:
     """Normalised cylindrical coordinates of the frustum: ``V_coord`` (eq. 5).
 
-    Each bin's LiDAR-frame point is converted to ``(r, theta, z)`` and scaled
-    to ``[0, 1]`` by the cylinder range (values outside the range go beyond
-    ``[0, 1]`` unchanged so the network still sees them). The ``D`` bins are
-    stacked on channels, as in PETR's 3D position embedding.
+    Each bin's working-frame point is converted to ``(r, theta, z)`` and
+    scaled to ``[0, 1]`` by the cylinder range (values outside the range go
+    beyond ``[0, 1]`` unchanged so the network still sees them). The ``D``
+    bins are stacked on channels, as in PETR's 3D position embedding.
 
     Args:
         points (Tensor): From :func:`frustum_to_lidar`.

@@ -1,7 +1,9 @@
 """Cartesian <-> cylindrical coordinate conversion.
 
 OccCylindrical (eqs. 4-5) and PointOcc describe every point by its radius
-``r``, azimuth ``theta`` and height ``z`` in the LiDAR frame. The conversion
+``r``, azimuth ``theta`` and height ``z`` in the working frame (the LiDAR
+frame, or the ego frame for Occ3D; see
+:mod:`projects.occ_common.transforms.frames`). The conversion
 lives here rather than in ``projects/occ_cyl`` because the shared
 :class:`DepthNet` position embedding needs it too.
 """

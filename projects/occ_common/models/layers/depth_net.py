@@ -20,6 +20,8 @@ from mmdet3d.utils import ConfigType, OptMultiConfig
 from mmengine.model import BaseModule
 from torch import Tensor, nn
 
+from ...geometry.depth import num_depth_bins as num_depth_bins_of
+
 
 class _ResBlock(nn.Module):
     """3x3-3x3 residual block of BEVDepth's depth branch.
@@ -118,7 +120,11 @@ class DepthNet(BaseModule):
         in_channels (int): Channels of the image features.
         mid_channels (int): Channels inside the network.
         context_channels (int): Channels ``C`` of ``V_context``.
-        num_depth_bins (int): Number of depth bins ``D``.
+        num_depth_bins (int, optional): Number of depth bins ``D``; may be
+            left out when ``depth_bound`` is given.
+        depth_bound (Sequence[float], optional): ``(min, max, step)`` of the
+            bins in metres, from which ``D`` is derived (the detectors pass
+            their own). Defaults to None.
         position_channels (int): Channels of ``V_coord`` (``3 * D`` for the
             cylindrical embedding); 0 drops the ``CNN2(V_coord)`` term.
             Defaults to 0.
@@ -139,7 +145,8 @@ class DepthNet(BaseModule):
                  in_channels: int,
                  mid_channels: int,
                  context_channels: int,
-                 num_depth_bins: int,
+                 num_depth_bins: Optional[int] = None,
+                 depth_bound: Optional[Sequence[float]] = None,
                  position_channels: int = 0,
                  with_depth_feature: bool = True,
                  camera_param_dims: int = 0,
@@ -149,6 +156,17 @@ class DepthNet(BaseModule):
                  norm_cfg: ConfigType = dict(type='BN'),
                  init_cfg: OptMultiConfig = None) -> None:
         super().__init__(init_cfg=init_cfg)
+        self.depth_bound = None
+        if depth_bound is not None:
+            self.depth_bound = tuple(float(v) for v in depth_bound)
+            derived = num_depth_bins_of(depth_bound)
+            if num_depth_bins not in (None, derived):
+                raise ValueError(f'DepthNet: num_depth_bins={num_depth_bins} '
+                                 f'but depth_bound {depth_bound} gives '
+                                 f'{derived} bins')
+            num_depth_bins = derived
+        if num_depth_bins is None:
+            raise ValueError('DepthNet needs depth_bound or num_depth_bins')
         for name, value in (('in_channels', in_channels),
                             ('mid_channels', mid_channels),
                             ('context_channels', context_channels),

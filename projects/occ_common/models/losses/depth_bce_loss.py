@@ -1,5 +1,5 @@
 """BEVDepth's LiDAR-supervised depth loss (binary cross-entropy on bins)."""
-from typing import Sequence, Tuple
+from typing import Sequence
 
 import torch
 import torch.nn as nn
@@ -7,96 +7,7 @@ import torch.nn.functional as F
 from mmdet3d.registry import MODELS
 from torch import Tensor
 
-
-def num_depth_bins(depth_bound: Sequence[float]) -> int:
-    """Number of depth bins D = round((dmax - dmin) / step).
-
-    Args:
-        depth_bound (Sequence[float]): ``(dmin, dmax, step)`` in metres.
-
-    Returns:
-        int: D.
-
-    Raises:
-        ValueError: If the bound is not three numbers with dmin < dmax and
-            step > 0.
-    """
-    if len(depth_bound) != 3:
-        raise ValueError('expected depth_bound = (dmin, dmax, step), got '
-                         f'{depth_bound!r}.')
-    dmin, dmax, step = (float(v) for v in depth_bound)
-    if not (step > 0 and dmax > dmin):
-        raise ValueError('expected depth_bound with dmin < dmax and step > 0,'
-                         f' got {depth_bound!r}.')
-    return int(round((dmax - dmin) / step))
-
-
-def patch_min_depth(gt_depth: Tensor, downsample: int) -> Tensor:
-    """Nearest LiDAR depth of each ``downsample`` x ``downsample`` patch.
-
-    The nearest return is kept because it is the surface the camera sees
-    in that patch (farther returns are occluded or leak through edges).
-
-    Args:
-        gt_depth (Tensor): Sparse LiDAR depth map, 0 where there is no
-            return. Shape (B*N, H, W).
-        downsample (int): Feature stride; H and W must be multiples of it.
-
-    Returns:
-        Tensor: Minimum positive depth per patch, 0 for patches without any
-        return. Shape (B*N, H / downsample, W / downsample).
-
-    Raises:
-        ValueError: If the shape is not (B*N, H, W) or H, W are not
-            multiples of ``downsample``.
-    """
-    if gt_depth.dim() != 3:
-        raise ValueError('expected gt_depth of shape (B*N, H, W), got '
-                         f'{tuple(gt_depth.shape)}.')
-    num, height, width = gt_depth.shape
-    if height % downsample or width % downsample:
-        raise ValueError(f'gt_depth size {height}x{width} is not a multiple '
-                         f'of downsample={downsample}.')
-    h, w = height // downsample, width // downsample
-    patches = gt_depth.reshape(num, h, downsample, w, downsample)
-    # Missing returns become +inf so that they never win the minimum; a
-    # patch with no return at all stays inf and is mapped back to 0.
-    patches = torch.where(patches > 0, patches,
-                          torch.full_like(patches, float('inf')))
-    nearest = patches.amin(dim=(2, 4))
-    return torch.where(torch.isinf(nearest), torch.zeros_like(nearest),
-                       nearest)
-
-
-def depth_to_bins(gt_depth: Tensor, downsample: int,
-                  depth_bound: Sequence[float]) -> Tuple[Tensor, Tensor]:
-    """One-hot depth-bin targets of the feature pixels, as in BEVDepth.
-
-    Each feature pixel takes the nearest LiDAR depth d of its patch
-    (:func:`patch_min_depth`) and the bin ``k = floor((d - dmin) / step)``;
-    pixels without a return or with k outside ``[0, D)`` (d < dmin or
-    d >= dmin + D * step) get an all-zero row and ``valid = False``.
-
-    Args:
-        gt_depth (Tensor): Sparse LiDAR depth map, 0 where there is no
-            return. Shape (B*N, H, W).
-        downsample (int): Feature stride.
-        depth_bound (Sequence[float]): ``(dmin, dmax, step)`` in metres.
-
-    Returns:
-        tuple[Tensor, Tensor]: The float one-hot targets,
-        shape (B*N*h*w, D) in (B*N, h, w) row-major order, and the bool
-        mask of pixels with a target, shape (B*N*h*w,).
-    """
-    num_bins = num_depth_bins(depth_bound)
-    dmin, _, step = (float(v) for v in depth_bound)
-    nearest = patch_min_depth(gt_depth, downsample).reshape(-1)
-    bins = torch.floor((nearest - dmin) / step)
-    valid = (nearest > 0) & (bins >= 0) & (bins < num_bins)
-    index = torch.where(valid, bins, torch.zeros_like(bins)).long()
-    onehot = F.one_hot(index, num_bins).to(gt_depth.dtype)
-    onehot = onehot * valid[:, None].to(onehot.dtype)
-    return onehot, valid
+from ...geometry.depth import depth_to_bins, num_depth_bins
 
 
 @MODELS.register_module()
@@ -148,7 +59,8 @@ class DepthBCELoss(nn.Module):
 
         Returns:
             Tensor: Scalar loss; zero (with zero gradients) when no pixel
-            has a target.
+            has a target, NaN when a prediction with a target is NaN or
+            infinite (for the non-finite loss guard to name).
         """
         if depth_pred.dim() != 4 or depth_pred.shape[1] != self.num_bins:
             raise ValueError(
@@ -167,12 +79,22 @@ class DepthBCELoss(nn.Module):
                                       self.depth_bound)
         pred = depth_pred.float().permute(0, 2, 3, 1).reshape(
             -1, self.num_bins)
+        picked = pred[valid]
+        # Non-finite probabilities (a diverging step, or NaN inputs) would
+        # make BCE raise ("all elements of input should be between 0 and
+        # 1"; a device assert on CUDA). BCE gets a stand-in of 0.5 there
+        # and the loss becomes NaN, which NonFiniteLossHook reports with
+        # the iteration and this term's name. No host sync is needed.
+        finite = torch.isfinite(picked)
+        safe = torch.where(finite, picked, torch.full_like(picked, 0.5))
         # Over an empty selection the sum is a connected zero, so the
         # no-LiDAR batch needs no special case. CUDA autocast refuses
         # binary_cross_entropy outright (``--amp``), so it runs outside it,
         # in float32, as BEVDepth does.
         with torch.autocast(device_type=pred.device.type, enabled=False):
             bce = F.binary_cross_entropy(
-                pred[valid], target[valid], reduction='none').sum()
+                safe.clamp(0.0, 1.0), target[valid], reduction='none').sum()
         loss = bce / valid.sum().clamp(min=1)
+        loss = torch.where(finite.all(), loss,
+                           torch.full_like(loss, float('nan')))
         return self.loss_weight * loss

@@ -2,16 +2,16 @@
 from typing import Optional, Sequence
 
 import torch
-import torch.nn as nn
 import torch.nn.functional as F
 from mmdet3d.registry import MODELS
 from torch import Tensor
 
+from .occupancy_loss import OccupancyLossTerm
 from .utils import supervised_voxels, zero_with_grad
 
 
 @MODELS.register_module()
-class OccFocalLoss(nn.Module):
+class OccFocalLoss(OccupancyLossTerm):
     """Multi-class (softmax) focal loss with an ignore label.
 
     Implements eq. 5 of Lin et al., "Focal Loss for Dense Object Detection"
@@ -38,39 +38,22 @@ class OccFocalLoss(nn.Module):
         loss_weight (float): Factor applied to the loss. Defaults to 1.0.
     """
 
+    loss_name = 'loss_focal'
+
     def __init__(self,
                  gamma: float = 2.0,
                  class_weight: Optional[Sequence[float]] = None,
                  ignore_index: int = 255,
                  loss_weight: float = 1.0) -> None:
-        super().__init__()
+        super().__init__(ignore_index, loss_weight, class_weight)
         if gamma < 0:
             raise ValueError(f'OccFocalLoss: expected gamma >= 0, got '
                              f'{gamma}.')
         self.gamma = float(gamma)
-        self.class_weight = (None if class_weight is None else
-                             [float(w) for w in class_weight])
-        self.ignore_index = ignore_index
-        self.loss_weight = loss_weight
-
-    @property
-    def loss_name(self) -> str:
-        """Name of the term in a loss dict."""
-        return 'loss_focal'
 
     def forward(self, logits: Tensor, target: Tensor) -> Tensor:
-        """Compute the loss.
-
-        Args:
-            logits (Tensor): Class scores before softmax.
-                Shape (B, C, X, Y, Z) or (N, C).
-            target (Tensor): Integer labels in ``[0, C)`` or
-                ``ignore_index``. Shape (B, X, Y, Z) or (N,).
-
-        Returns:
-            Tensor: Scalar loss; zero (with zero gradients) when every voxel
-            is ignored.
-        """
+        """Focal loss of the supervised voxels (see
+        :class:`~.occupancy_loss.OccupancyLossTerm` for the shapes)."""
         picked = supervised_voxels(logits, target, self.ignore_index,
                                    'OccFocalLoss', self.class_weight)
         if picked is None:

@@ -11,11 +11,11 @@ an all-ignored batch.
 from typing import List, Optional, Sequence, Union
 
 import torch
-import torch.nn as nn
 import torch.nn.functional as F
 from mmdet3d.registry import MODELS
 from torch import Tensor
 
+from .occupancy_loss import OccupancyLossTerm
 from .utils import supervised_voxels, zero_with_grad
 
 
@@ -76,7 +76,7 @@ def lovasz_softmax_flat(
 
 
 @MODELS.register_module()
-class OccLovaszLoss(nn.Module):
+class OccLovaszLoss(OccupancyLossTerm):
     """Lovasz-softmax loss for logits with any number of spatial axes.
 
     A surrogate of the per-class Jaccard index (Berman et al., CVPR 2018,
@@ -93,12 +93,14 @@ class OccLovaszLoss(nn.Module):
         loss_weight (float): Factor applied to the loss. Defaults to 1.0.
     """
 
+    loss_name = 'loss_lovasz'
+
     def __init__(self,
                  classes: Union[str, Sequence[int]] = 'present',
                  class_weight: Optional[Sequence[float]] = None,
                  ignore_index: int = 255,
                  loss_weight: float = 1.0) -> None:
-        super().__init__()
+        super().__init__(ignore_index, loss_weight, class_weight)
         if isinstance(classes, str):
             if classes not in ('present', 'all'):
                 raise ValueError("OccLovaszLoss: expected classes 'present',"
@@ -108,29 +110,10 @@ class OccLovaszLoss(nn.Module):
                              f'indices, got {classes!r}.')
         self.classes: Union[str, List[int]] = (
             classes if isinstance(classes, str) else list(classes))
-        self.class_weight = (None if class_weight is None else
-                             [float(w) for w in class_weight])
-        self.ignore_index = ignore_index
-        self.loss_weight = loss_weight
-
-    @property
-    def loss_name(self) -> str:
-        """Name of the term in a loss dict."""
-        return 'loss_lovasz'
 
     def forward(self, logits: Tensor, target: Tensor) -> Tensor:
-        """Compute the loss.
-
-        Args:
-            logits (Tensor): Class scores before softmax.
-                Shape (B, C, X, Y, Z) or (N, C).
-            target (Tensor): Integer labels in ``[0, C)`` or
-                ``ignore_index``. Shape (B, X, Y, Z) or (N,).
-
-        Returns:
-            Tensor: Scalar loss; zero (with zero gradients) when no voxel
-            is supervised.
-        """
+        """Lovasz-softmax of the supervised voxels (see
+        :class:`~.occupancy_loss.OccupancyLossTerm` for the shapes)."""
         # Shapes are checked by supervised_voxels; this needs only C.
         num_classes = logits.shape[1] if logits.dim() >= 2 else None
         if num_classes is not None and not isinstance(

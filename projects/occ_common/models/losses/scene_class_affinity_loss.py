@@ -1,10 +1,10 @@
 """Scene-class affinity loss (MonoScene) with a configurable empty class."""
 import torch
-import torch.nn as nn
 import torch.nn.functional as F
 from mmdet3d.registry import MODELS
 from torch import Tensor
 
+from .occupancy_loss import OccupancyLossTerm
 from .utils import supervised_voxels, zero_with_grad
 
 
@@ -23,7 +23,7 @@ def _neg_log_ratio(numerator: Tensor, denominator: Tensor,
 
 
 @MODELS.register_module()
-class SceneClassAffinityLoss(nn.Module):
+class SceneClassAffinityLoss(OccupancyLossTerm):
     """Scene-class affinity loss of MonoScene, geometric or semantic.
 
     Implements Sec. 3.3.1 (the :math:`P_c, R_c, S_c` definitions and
@@ -66,7 +66,7 @@ class SceneClassAffinityLoss(nn.Module):
                  ignore_index: int = 255,
                  loss_weight: float = 1.0,
                  eps: float = 1e-5) -> None:
-        super().__init__()
+        super().__init__(ignore_index, loss_weight)
         if mode not in ('geo', 'sem'):
             raise ValueError("SceneClassAffinityLoss: expected mode 'geo' "
                              f"or 'sem', got {mode!r}.")
@@ -75,8 +75,6 @@ class SceneClassAffinityLoss(nn.Module):
                              f'{eps}.')
         self.mode = mode
         self.empty_index = empty_index
-        self.ignore_index = ignore_index
-        self.loss_weight = loss_weight
         self.eps = eps
 
     @property
@@ -85,18 +83,8 @@ class SceneClassAffinityLoss(nn.Module):
         return f'loss_{self.mode}_scal'
 
     def forward(self, logits: Tensor, target: Tensor) -> Tensor:
-        """Compute the loss.
-
-        Args:
-            logits (Tensor): Class scores before softmax.
-                Shape (B, C, X, Y, Z) or (N, C).
-            target (Tensor): Integer labels in ``[0, C)`` or
-                ``ignore_index``. Shape (B, X, Y, Z) or (N,).
-
-        Returns:
-            Tensor: Scalar loss; zero (with zero gradients) when every voxel
-            is ignored.
-        """
+        """Scene-class affinity of the supervised voxels (see
+        :class:`~.occupancy_loss.OccupancyLossTerm` for the shapes)."""
         name = f'SceneClassAffinityLoss({self.mode})'
         # Shapes are checked by supervised_voxels; this needs only C.
         num_classes = logits.shape[1] if logits.dim() >= 2 else None

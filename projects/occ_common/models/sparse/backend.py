@@ -5,6 +5,8 @@ backward (its backward asserts CUDA) and may be missing altogether. The
 ``'torch'`` backend (:mod:`.torch_backend`) runs forward and backward on
 any device. ``'auto'`` decides per call from the features' device.
 """
+from typing import Optional, Protocol, Tuple
+
 from torch import Tensor
 
 BACKENDS = ('auto', 'spconv', 'torch')
@@ -82,3 +84,33 @@ def resolve_backend(backend: str, features: Tensor) -> str:
                 "spconv is a CPU-only build; install spconv-cuXXX or use "
                 "backend='torch'")
     return backend
+
+
+class SparseConvLayer(Protocol):
+    """What a backend reads from a sparse convolution layer.
+
+    :class:`~.sparse_conv.SparseConvBase` provides it; the backends depend
+    on this description rather than on the layer class, so the layer module
+    imports the backends and nothing imports it back.
+    """
+
+    in_channels: int
+    out_channels: int
+    kernel_size: Tuple[int, int, int]
+    stride: Tuple[int, int, int]
+    padding: Tuple[int, int, int]
+    dilation: Tuple[int, int, int]
+    indice_key: Optional[str]
+    subm: bool
+    inverse: bool
+    training: bool
+    weight: Tensor
+    bias: Optional[Tensor]
+
+    @property
+    def conv1x1(self) -> bool:
+        """bool: Kernel volume 1 at stride 1, a per-site linear map."""
+
+    @property
+    def geometry(self) -> tuple:
+        """tuple: Hashable description of everything but the parameters."""

@@ -8,14 +8,11 @@ spconv's index pairs are cached in the sparse tensor's ``indice_dict``
 under ``('spconv', indice_key)``, separate from the torch backend's.
 """
 import functools
-from typing import TYPE_CHECKING, Dict, Hashable, Tuple
+from typing import Dict, Hashable, Tuple
 
-from .backend import resolve_backend
+from .backend import SparseConvLayer, resolve_backend
 from .sparse_tensor import SparseTensor
 from .torch_backend import torch_sparse_conv
-
-if TYPE_CHECKING:  # imported for annotations only; it imports this module
-    from .sparse_conv import SparseConvBase
 
 BACKEND = 'spconv'
 
@@ -58,12 +55,12 @@ def _make_convolution(geometry: Tuple, native: bool) -> object:
         algo=ConvAlgo.Native if native else None)
 
 
-def spconv_sparse_conv(layer: 'SparseConvBase',
+def spconv_sparse_conv(layer: SparseConvLayer,
                        x: SparseTensor) -> SparseTensor:
     """Run one sparse convolution layer with spconv.
 
     Args:
-        layer (SparseConvBase): Provides the geometry, ``weight`` and
+        layer (SparseConvLayer): Provides the geometry, ``weight`` and
             ``bias``.
         x (SparseTensor): Input with ``layer.in_channels`` channels.
 

@@ -106,7 +106,7 @@ class SPVCNNEncoder(BaseModule):
         self.total_stride = math.prod(self.stage_strides)
         self.bev_shape = tuple(int(s) for s in bev_shape)
         self.bev_reduce = bev_reduce
-        self.grid_shape = self._grid_shape()
+        self.sparse_shape = self._sparse_shape()
         self.bev_cell = tuple(
             (self.point_cloud_range[a + 3] - self.point_cloud_range[a]) / n
             for a, n in ((0, self.bev_shape[1]), (1, self.bev_shape[0])))
@@ -143,7 +143,7 @@ class SPVCNNEncoder(BaseModule):
             self.point_mlps.append(LinearBNReLU(point_channels, stage_out))
             point_channels = stage_out
         if bev_reduce == 'concat':
-            levels = self.grid_shape[0] // self.total_stride
+            levels = self.sparse_shape[0] // self.total_stride
             self.bev_proj = nn.Sequential(
                 nn.Conv2d(channels * levels, out_channels, 1, bias=False),
                 nn.BatchNorm2d(out_channels), nn.ReLU(inplace=True))
@@ -184,8 +184,9 @@ class SPVCNNEncoder(BaseModule):
             raise ValueError(f'SPVCNNEncoder bev_reduce must be one of '
                              f'{_REDUCTIONS}, got {bev_reduce!r}')
 
-    def _grid_shape(self) -> Tuple[int, int, int]:
-        """Voxel grid ``(Z, Y, X)``, padded to a multiple of the stride.
+    def _sparse_shape(self) -> Tuple[int, int, int]:
+        """Sparse voxel grid ``(Z, Y, X)`` (spconv's and mmdet3d's
+        ``sparse_shape``), padded to a multiple of the stride.
 
         Padding lets every down-sampling keep the last partial voxel; the
         padded cells lie outside the range and never hold a point.
@@ -204,8 +205,8 @@ class SPVCNNEncoder(BaseModule):
         """The last stage's voxels must fit the BEV grid (see bev_reduce)."""
         coarse = [v * self.total_stride for v in self.voxel_size[:2]]
         if self.bev_reduce == 'concat':
-            final = (self.grid_shape[1] // self.total_stride,
-                     self.grid_shape[2] // self.total_stride)
+            final = (self.sparse_shape[1] // self.total_stride,
+                     self.sparse_shape[2] // self.total_stride)
             if final != self.bev_shape:
                 raise ValueError(
                     f"SPVCNNEncoder bev_reduce='concat' needs the last "
@@ -308,21 +309,21 @@ class SPVCNNEncoder(BaseModule):
         batch_size = len(points)
         # float32 rounding can put a point just below the range maximum
         # on the boundary cell index; keep it in the last cell.
-        upper = position.new_tensor(self.grid_shape).long() - 1
+        upper = position.new_tensor(self.sparse_shape).long() - 1
         fine = torch.minimum(torch.floor(position).long(), upper)
         keys, rows = torch.unique(
-            linearize(batch, fine, self.grid_shape), return_inverse=True)
+            linearize(batch, fine, self.sparse_shape), return_inverse=True)
         # Grouping the points by voxel makes every later voxel lookup of
         # the points nearly sequential (several times faster on CPU); the
         # outputs do not depend on the point order.
         order = torch.argsort(rows)
         batch, position, features, fine, rows = (
             t[order] for t in (batch, position, features, fine, rows))
-        coords = delinearize(keys, self.grid_shape)
+        coords = delinearize(keys, self.sparse_shape)
         x = SparseTensor(
             scatter_mean(features, rows, keys.numel()),
             coords,
-            self.grid_shape,
+            self.sparse_shape,
             batch_size,
             check=False)
         x = self.stem(x)

@@ -11,15 +11,13 @@ and match its arithmetic, including spconv's 1x1 quirk (see
 :func:`dense_1x1`), so a state dict trained with either backend gives the
 same outputs in the other.
 """
-from typing import TYPE_CHECKING, Optional
+from typing import Optional
 
 from torch import Tensor
 
+from .backend import SparseConvLayer
 from .rulebook import Rulebook, strided_rulebook, submanifold_rulebook
 from .sparse_tensor import SparseTensor
-
-if TYPE_CHECKING:  # imported for annotations only; it imports this module
-    from .sparse_conv import SparseConvBase
 
 BACKEND = 'torch'
 
@@ -90,7 +88,7 @@ def dense_1x1(features: Tensor, weight: Tensor,
     return out
 
 
-def _reused_subm(layer: 'SparseConvBase', x: SparseTensor,
+def _reused_subm(layer: SparseConvLayer, x: SparseTensor,
                  rulebook: Rulebook) -> Rulebook:
     """Check that a cached rulebook fits this submanifold layer."""
     problems = []
@@ -113,7 +111,7 @@ def _reused_subm(layer: 'SparseConvBase', x: SparseTensor,
     return rulebook
 
 
-def _inverse_rulebook(layer: 'SparseConvBase', x: SparseTensor) -> Rulebook:
+def _inverse_rulebook(layer: SparseConvLayer, x: SparseTensor) -> Rulebook:
     """Look up and invert the rulebook of the paired strided conv."""
     cache_key = (BACKEND, layer.indice_key)
     if cache_key not in x.indice_dict:
@@ -142,12 +140,12 @@ def _inverse_rulebook(layer: 'SparseConvBase', x: SparseTensor) -> Rulebook:
     return rulebook.inverted()
 
 
-def torch_sparse_conv(layer: 'SparseConvBase',
+def torch_sparse_conv(layer: SparseConvLayer,
                       x: SparseTensor) -> SparseTensor:
     """Run one sparse convolution layer with the torch backend.
 
     Args:
-        layer (SparseConvBase): Provides the geometry, ``weight`` and
+        layer (SparseConvLayer): Provides the geometry, ``weight`` and
             ``bias``.
         x (SparseTensor): Input with ``layer.in_channels`` channels.
 

@@ -4,24 +4,13 @@ import math
 import pytest
 import torch
 
+from projects.occ_common.geometry.depth import project_points
 from projects.occ_common.models.layers import (camera_parameter_vector,
                                                create_frustum,
                                                cylindrical_position_embedding,
-                                               depth_bin_values,
                                                frustum_to_lidar,
-                                               lidar2img_matrix,
-                                               project_points)
+                                               lidar2img_matrix)
 from projects.occ_common.testing.occ_inputs import ring_camera_rig
-
-
-def test_depth_bins_follow_the_paper_counts():
-    """(1, 51, 1) -> 50 bins 1..50 m (6 x 50 x 58 x 100 points, Table VI);
-    (1, 51, 2) -> 25 bins 1, 3, ..., 49; (1, 51, 10) -> 1, 11, 21, 31, 41."""
-    assert depth_bin_values((1, 51, 1)).tolist() == list(range(1, 51))
-    assert depth_bin_values((1, 51, 2)).tolist() == list(range(1, 50, 2))
-    assert depth_bin_values((1, 51, 10)).tolist() == [1, 11, 21, 31, 41]
-    with pytest.raises(ValueError, match='depth_bound'):
-        depth_bin_values((1, 51))
 
 
 def test_frustum_cell_centres():
@@ -98,23 +87,6 @@ def test_position_embedding_values_and_layout():
     torch.testing.assert_close(emb.view(-1), expected)
     with pytest.raises(ValueError, match='cyl_range'):
         cylindrical_position_embedding(pts, (0, 0, 0, 1, 1))
-
-
-def test_project_points_empty_and_gradient():
-    """No points give (N, 0, 2) pixels; the projection is differentiable:
-    u = 32 - 32 y / x at camera 0, so du/dy = -32 / x = -8 at x = 4."""
-    cam2img, lidar2cam = ring_camera_rig(2, (32, 64), 32.0)
-    l2i = cam2img @ lidar2cam
-    uv, depth = project_points(torch.zeros(0, 3, dtype=torch.float64), l2i)
-    assert uv.shape == (2, 0, 2) and depth.shape == (2, 0)
-    pts = torch.tensor([[4.0, 1.0, 0.0]], dtype=torch.float64,
-                       requires_grad=True)
-    uv, _ = project_points(pts, l2i)
-    uv[0, 0, 0].backward()
-    torch.testing.assert_close(pts.grad[0, 1],
-                               torch.tensor(-8.0, dtype=torch.float64))
-    with pytest.raises(ValueError, match='points'):
-        project_points(torch.zeros(3, 2), l2i)
 
 
 def test_camera_parameter_vector():

@@ -104,3 +104,15 @@ def test_bad_inputs_raise():
         net(torch.randn(2, 8, 3, 4), None, torch.randn(2, 21))
     with pytest.raises(ValueError, match='B\\*N, C, h, w'):
         net(torch.randn(8, 3, 4))
+
+
+def test_bins_derived_from_depth_bound():
+    """(1, 51, 10) m gives 5 bins: the classifier predicts 5 channels;
+    a num_depth_bins that disagrees is refused, none at all too."""
+    net = _net(num_depth_bins=None, depth_bound=(1.0, 51.0, 10.0))
+    assert net.num_depth_bins == 5 and net.depth_bound == (1.0, 51.0, 10.0)
+    assert net(torch.randn(1, 8, 3, 4))['depth'].shape == (1, 5, 3, 4)
+    with pytest.raises(ValueError, match='gives 5 bins'):
+        _net(num_depth_bins=4, depth_bound=(1.0, 51.0, 10.0))
+    with pytest.raises(ValueError, match='depth_bound or num_depth_bins'):
+        _net(num_depth_bins=None)

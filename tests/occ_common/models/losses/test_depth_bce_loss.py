@@ -4,43 +4,11 @@ import math
 import pytest
 import torch
 
-from projects.occ_common.models.losses import (DepthBCELoss, depth_to_bins,
-                                               patch_min_depth)
+from projects.occ_common.models.losses import DepthBCELoss
+from projects.occ_common.testing.occ_inputs import (PATCH_DEPTH_BOUND,
+                                                    patch_depth_map)
 
-BOUND = (1.0, 5.0, 1.0)  # D = 4 bins: [1, 2) [2, 3) [3, 4) [4, 5)
-
-
-def _depth_map():
-    """A (1, 4, 4) LiDAR depth map, 2 x 2 patches:
-
-    top-left     (0, 3.5, 0, 2.2)  -> nearest 2.2 -> bin 1
-    top-right    all 0             -> no return
-    bottom-left  (7, 6, 0, 0)      -> nearest 6 >= 5 -> dropped
-    bottom-right (1.0, 4.9, 3, 0)  -> nearest 1.0 -> bin 0
-    """
-    return torch.tensor([[[0.0, 3.5, 0.0, 0.0], [0.0, 2.2, 0.0, 0.0],
-                          [7.0, 6.0, 1.0, 4.9], [0.0, 0.0, 3.0, 0.0]]])
-
-
-def test_patch_min_depth_and_bins():
-    """Nearest depth per patch (0 = none) and one-hot bins in (h, w)
-    row-major order; only the first and last pixel have a target."""
-    nearest = patch_min_depth(_depth_map(), 2)
-    assert torch.allclose(nearest, torch.tensor([[[2.2, 0.0], [6.0, 1.0]]]))
-    onehot, valid = depth_to_bins(_depth_map(), 2, BOUND)
-    assert onehot.shape == (4, 4)
-    assert valid.tolist() == [True, False, False, True]
-    assert onehot.tolist() == [[0, 1, 0, 0], [0, 0, 0, 0], [0, 0, 0, 0],
-                               [1, 0, 0, 0]]
-
-
-def test_bin_edges():
-    """floor((d - 1) / 1): 0.99 -> -1 dropped, 1.0 -> 0, 4.99 -> 3,
-    5.0 (= dmax) -> 4 dropped."""
-    depth = torch.tensor([[[0.99, 1.0, 4.99, 5.0]]])
-    onehot, valid = depth_to_bins(depth, 1, BOUND)
-    assert valid.tolist() == [False, True, True, False]
-    assert onehot.argmax(1)[valid].tolist() == [0, 3]
+BOUND = PATCH_DEPTH_BOUND  # 4 bins of 1 m from 1 m
 
 
 def test_depth_loss_hand_computed():
@@ -58,7 +26,8 @@ def test_depth_loss_hand_computed():
     pred[0, :, 1, 1] = torch.tensor([0.5, 0.5, 0.0, 0.0])
     pred[0, :, 0, 1] = torch.tensor([1.0, 0.0, 0.0, 0.0])  # no target
     pred.requires_grad_()
-    loss = DepthBCELoss(depth_bound=BOUND, downsample=2)(pred, _depth_map())
+    loss = DepthBCELoss(
+        depth_bound=BOUND, downsample=2)(pred, patch_depth_map())
     expected = 3 * (3 * math.log(4 / 3) + 4 * math.log(2)) / 2
     assert loss.item() == pytest.approx(expected, rel=1e-6)
     assert loss.item() == pytest.approx(5.4534523, abs=1e-6)
@@ -67,11 +36,31 @@ def test_depth_loss_hand_computed():
     assert torch.equal(pred.grad[0, :, 0, 1], torch.zeros(4))
 
 
+@pytest.mark.parametrize('bad', [float('nan'), float('inf')])
+def test_non_finite_prediction_gives_nan_not_a_crash(bad):
+    """A diverged depth net: BCE raised "all elements of input should be
+    between 0 and 1"; now the loss is NaN (for NonFiniteLossHook to name)
+    and backward stays finite. A bad value at a pixel without a target
+    changes nothing."""
+    pred = torch.full((1, 4, 2, 2), 0.25)
+    loss_fn = DepthBCELoss(depth_bound=BOUND, downsample=2)
+    good = loss_fn(pred, patch_depth_map())
+    untargeted = pred.clone()
+    untargeted[0, :, 0, 1] = bad  # feature pixel (0, 1) has no return
+    assert loss_fn(untargeted, patch_depth_map()).item() == good.item()
+    pred[0, 2, 1, 1] = bad  # feature pixel (1, 1) has one
+    pred.requires_grad_()
+    loss = loss_fn(pred, patch_depth_map())
+    assert torch.isnan(loss)
+    loss.backward()
+    assert torch.isfinite(pred.grad).all()
+
+
 def test_no_lidar_is_finite_zero():
     """No LiDAR return anywhere: 0 with zero gradients."""
     pred = torch.full((2, 4, 2, 2), 0.25, requires_grad=True)
-    loss = DepthBCELoss(depth_bound=BOUND, downsample=2)(pred,
-                                                         torch.zeros(2, 4, 4))
+    loss = DepthBCELoss(
+        depth_bound=BOUND, downsample=2)(pred, torch.zeros(2, 4, 4))
     assert loss.item() == 0.0
     loss.backward()
     assert torch.equal(pred.grad, torch.zeros_like(pred))
@@ -82,11 +71,9 @@ def test_default_bins_and_bad_inputs():
     assert DepthBCELoss().num_bins == 49
     loss = DepthBCELoss(depth_bound=BOUND, downsample=2)
     with pytest.raises(ValueError, match='4, h, w'):
-        loss(torch.zeros(1, 3, 2, 2), _depth_map())
+        loss(torch.zeros(1, 3, 2, 2), patch_depth_map())
     with pytest.raises(ValueError, match='does not match'):
-        loss(torch.zeros(1, 4, 1, 2), _depth_map())
-    with pytest.raises(ValueError, match='multiple of downsample'):
-        patch_min_depth(torch.zeros(1, 5, 4), 2)
+        loss(torch.zeros(1, 4, 1, 2), patch_depth_map())
     with pytest.raises(ValueError, match='dmin < dmax'):
         DepthBCELoss(depth_bound=(5.0, 1.0, 1.0))
 
@@ -112,12 +99,11 @@ def test_depth_loss_under_autocast(monkeypatch):
             raise RuntimeError('binary_cross_entropy is unsafe to autocast')
         return real_bce(*args, **kwargs)
 
-    monkeypatch.setattr(depth_bce_loss.F, 'binary_cross_entropy',
-                        refusing_bce)
+    monkeypatch.setattr(depth_bce_loss.F, 'binary_cross_entropy', refusing_bce)
     pred = _hand_case().requires_grad_()
     with torch.autocast('cpu', dtype=torch.bfloat16):
-        loss = DepthBCELoss(depth_bound=BOUND, downsample=2)(pred,
-                                                             _depth_map())
+        loss = DepthBCELoss(
+            depth_bound=BOUND, downsample=2)(pred, patch_depth_map())
     assert loss.dtype == torch.float32
     assert loss.item() == pytest.approx(5.4534523, abs=1e-6)
     loss.backward()
@@ -130,8 +116,9 @@ def test_depth_loss_under_cuda_autocast():
     float32 value 5.4534523 of test_depth_loss_hand_computed."""
     pred = _hand_case().cuda().half().requires_grad_()
     with torch.autocast('cuda', dtype=torch.float16):
-        loss = DepthBCELoss(depth_bound=BOUND, downsample=2)(
-            pred, _depth_map().cuda())
+        loss = DepthBCELoss(
+            depth_bound=BOUND,
+            downsample=2)(pred, patch_depth_map().cuda())
     assert loss.item() == pytest.approx(5.4534523, abs=1e-5)
     loss.backward()
     assert torch.isfinite(pred.grad).all()

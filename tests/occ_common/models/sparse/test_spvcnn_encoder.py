@@ -217,7 +217,7 @@ def test_default_sdg_occ_geometry_and_registry():
     from mmdet3d.registry import MODELS
     enc = MODELS.build(dict(type='SPVCNNEncoder'))
     assert isinstance(enc, SPVCNNEncoder)
-    assert enc.grid_shape == (64, 800, 800)
+    assert enc.sparse_shape == (64, 800, 800)
     assert enc.total_stride == 4
     assert enc.bev_cell == pytest.approx((0.4, 0.4))
     assert enc.bev_shape == (200, 200)
@@ -234,7 +234,7 @@ def test_spconv_and_torch_backends_agree():
     points = [_cloud(40, 6), torch.zeros(0, 4), _cloud(15, 7)]
     threads = torch.get_num_threads()
     # spconv's CPU strided conv races with several threads (see
-    # test_sparse_conv_parity.single_thread).
+    # test_spconv_backend.single_thread).
     torch.set_num_threads(1)
     try:
         out_a, out_b = ours(points), theirs(points)

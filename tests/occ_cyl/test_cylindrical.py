@@ -74,6 +74,19 @@ def test_covers_the_output_grid_corners():
     assert bool(inside.all())
 
 
+def test_covering_reaches_the_far_corner():
+    """x in [-40, 30], y in [-10, 20]: the farthest corner is (-40, 20), at
+    (40^2 + 20^2)^0.5 = 44.72 m, plus the 1 cm margin; the height is the
+    box's, the azimuth the full circle."""
+    grid = CylinderGrid.covering((-40.0, -10.0, -1.0, 30.0, 20.0, 5.4),
+                                 (8, 16, 4))
+    assert grid.shape == (8, 16, 4)
+    assert grid.cyl_range == pytest.approx(
+        (0.0, -PI, -1.0, math.hypot(40, 20) + 0.01, PI, 5.4))
+    assert grid.full_circle
+    assert grid.covers_box((-40.0, -10.0, -1.0, 30.0, 20.0, 5.4))
+
+
 def test_normalize_and_round_trip():
     """normalize maps the range ends to -1 and 1: r = 2 of [0, 4] -> 0; and a
     voxel centre survives cyl -> cart -> cyl into the same voxel."""
@@ -99,7 +112,7 @@ def test_empty_points_and_gradient_through_normalize():
 
 def test_bad_specs_raise():
     """Bad shapes, ranges and an azimuth over 2 pi are refused."""
-    with pytest.raises(ValueError, match='grid_shape'):
+    with pytest.raises(ValueError, match='shape must be three'):
         CylinderGrid((4, 4), (0, -PI, -1, 4, PI, 1))
     with pytest.raises(ValueError, match='cyl_range'):
         CylinderGrid((4, 4, 2), (0, -PI, -1, 4, PI))

@@ -1,6 +1,5 @@
 """Tests of the OccCylindrical detector under the mmengine contract."""
 import copy
-import math
 
 import pytest
 import torch
@@ -14,13 +13,17 @@ from projects.occ_common.testing.occ_inputs import make_occ_batch
 register_all_modules(init_default_scope=False)
 
 PC_RANGE = [-8.0, -8.0, -2.0, 8.0, 8.0, 2.0]
-CYL_RANGE = [0.0, -math.pi, -2.0, 8 * math.sqrt(2) + 0.01, math.pi, 2.0]
-GRID = [8, 16, 4]
+VOXEL = [2.0, 2.0, 1.0]  # an (8, 8, 4) grid
 DEPTH_BOUND = [1.0, 13.0, 2.0]  # 6 bins at 1, 3, ..., 11 m
 NUM_BINS = 6
 CFG = dict(
     type='OccCylindrical',
     data_preprocessor=dict(type='mmdet3d.Det3DDataPreprocessor'),
+    point_cloud_range=PC_RANGE,
+    voxel_size=VOXEL,
+    num_classes=4,
+    cylinder_shape=[8, 16, 4],
+    depth_bound=DEPTH_BOUND,
     img_encoder=dict(
         type='MultiViewImageEncoder',
         backbone=dict(
@@ -37,8 +40,6 @@ CFG = dict(
         in_channels=8,
         mid_channels=8,
         context_channels=6,
-        num_depth_bins=NUM_BINS,
-        position_channels=3 * NUM_BINS,
         camera_param_dims=22,
         num_res_blocks=1,
         aspp_dilations=(1, 2)),
@@ -46,8 +47,8 @@ CFG = dict(
         type='LidarPointBranch', in_channels=5, img_channels=6,
         geo_channels=(8, ), out_channels=(8, )),
     tpv_fusion=dict(
-        type='TPVPolarFusion', grid_shape=GRID, cyl_range=CYL_RANGE,
-        cam_channels=6, lidar_channels=8, plane_channels=8, num_groups=2),
+        type='TPVPolarFusion', cam_channels=6, lidar_channels=8,
+        plane_channels=8, num_groups=2),
     tpv_encoder=dict(
         type='TPVPlaneEncoder',
         backbone=dict(
@@ -58,22 +59,17 @@ CFG = dict(
             type='mmdet.FPN', in_channels=[8, 16], out_channels=8,
             num_outs=2)),
     occ_head=dict(
-        type='CylindricalOccHead', in_channels=8, grid_shape=GRID,
-        cyl_range=CYL_RANGE, pc_range=PC_RANGE,
-        scale_shapes=[(8, 8, 4), (4, 4, 2)], hidden_channels=8,
-        num_classes=4,
+        type='CylindricalOccHead', in_channels=8, num_scales=2,
+        hidden_channels=8,
         loss_occ=dict(
-            type='MultiScaleOccupancyLoss', num_scales=2,
+            type='MultiScaleOccupancyLoss',
             losses=[
                 dict(type='OccFocalLoss'),
                 dict(type='OccLovaszLoss'),
                 dict(type='SceneClassAffinityLoss', mode='geo'),
                 dict(type='SceneClassAffinityLoss', mode='sem')
             ])),
-    depth_bound=DEPTH_BOUND,
-    loss_depth=dict(
-        type='DepthBCELoss', depth_bound=DEPTH_BOUND, downsample=16,
-        loss_weight=3.0))
+    loss_depth=dict(type='DepthBCELoss', downsample=16, loss_weight=3.0))
 
 
 def _build(**overrides):
@@ -112,6 +108,19 @@ def test_loss_terms_and_backward_with_an_empty_cloud():
     no_grad = [n for n, p in model.named_parameters()
                if p.requires_grad and p.grad is None]
     assert no_grad == []
+
+
+def test_one_lidar_point_trains():
+    """A batch whose only LiDAR point survived the filters: BatchNorm1d of
+    the point branch raised ("Expected more than 1 value per channel")."""
+    model = _build()
+    model.train()
+    data = _data(model, True, batch_size=1, num_points=(1, ))
+    assert data['inputs']['points'][0].shape[0] == 1
+    losses = model(**data, mode='loss')
+    assert all(torch.isfinite(v) for v in losses.values())
+    sum(losses.values()).backward()
+    assert model.point_branch.geo_mlp[0].weight.grad is not None
 
 
 def test_predict_returns_finest_labels_and_keeps_gt():
@@ -170,10 +179,36 @@ def test_fused_and_naive_lift_give_the_same_model_output():
     assert all(torch.equal(x, y) for x, y in zip(a, b))
 
 
+def test_one_owner_of_the_shared_values():
+    """The detector builds one cylinder covering (-8, 8)^2 (radius
+    8 sqrt(2) + 0.01 m) and hands that same object to the fusion and the
+    head; DepthNet predicts the 6 bins of depth_bound with 3 * 6 = 18
+    position channels, and the loss terms get empty_index 2 / ignore 7."""
+    model = _build(empty_index=2, ignore_index=7)
+    assert model.tpv_fusion.cylinder is model.cylinder
+    assert model.occ_head.cylinder is model.cylinder
+    assert model.cylinder.shape == (8, 16, 4)
+    assert model.cylinder.cyl_range[3] == pytest.approx(8 * 2**0.5 + 0.01)
+    assert model.depth_net.num_depth_bins == NUM_BINS
+    assert model.depth_net.position_channels == 3 * NUM_BINS
+    assert model.loss_depth.depth_bound == tuple(DEPTH_BOUND)
+    assert model.occ_head.scale_shapes == [(8, 8, 4), (4, 4, 2)]
+    sem = model.occ_head.loss_occ.losses[3]
+    assert (sem.empty_index, sem.ignore_index) == (2, 7)
+
+
 def test_bad_inputs_raise():
-    """Mismatched depth bins, missing inputs, metainfo and GT are named."""
-    with pytest.raises(ValueError, match='6 bins'):
-        _build(depth_net=dict(num_depth_bins=5, position_channels=15))
+    """Conflicting depth bins or labels, missing inputs, metainfo and GT
+    are named."""
+    with pytest.raises(ValueError, match='num_depth_bins=5'):
+        _build(depth_net=dict(num_depth_bins=5))
+    with pytest.raises(ValueError, match='depth_bound'):
+        _build(loss_depth=dict(depth_bound=[1.0, 13.0, 1.0]))
+    with pytest.raises(ValueError, match='empty_index'):
+        _build(occ_head=dict(
+            loss_occ=dict(CFG['occ_head']['loss_occ'], empty_index=1)))
+    with pytest.raises(ValueError, match='position_channels'):
+        _build(depth_net=dict(position_channels=5))
     model = _build()
     data = _data(model, True, batch_size=1, num_points=(20, ))
     with pytest.raises(ValueError, match='"points"'):

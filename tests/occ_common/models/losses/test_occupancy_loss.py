@@ -1,13 +1,15 @@
-"""Tests of the majority-vote GT down-sampling and the multi-scale loss."""
+"""Tests of the composed occupancy losses and the majority-vote GT
+down-sampling of the multi-scale one."""
 import math
 
 import pytest
 import torch
 
 from projects.occ_common.models.losses import (MultiScaleOccupancyLoss,
-                                               OccFocalLoss,
+                                               OccFocalLoss, OccupancyLoss,
                                                SceneClassAffinityLoss,
-                                               downsample_occupancy_gt)
+                                               downsample_occupancy_gt,
+                                               term_name)
 
 E, IGN = 0, 255  # empty, ignore
 
@@ -135,3 +137,42 @@ def test_multi_scale_bad_inputs_raise():
         MultiScaleOccupancyLoss([OccFocalLoss(), OccFocalLoss()])
     with pytest.raises(ValueError, match='empty_index=17'):
         MultiScaleOccupancyLoss([SceneClassAffinityLoss(empty_index=17)])
+
+
+def test_labels_are_stated_once_on_the_composed_loss():
+    """Occ3D's empty 17 and ignore 200 reach every term config that takes
+    them (SCAL takes both, focal only the ignore label); a term module
+    built elsewhere with other labels is refused."""
+    loss = OccupancyLoss([
+        dict(type='OccFocalLoss'),
+        dict(type='SceneClassAffinityLoss', mode='sem')
+    ], empty_index=17, ignore_index=200)
+    focal, scal = loss.losses
+    assert focal.ignore_index == 200 and not hasattr(focal, 'empty_index')
+    assert (scal.empty_index, scal.ignore_index) == (17, 200)
+    with pytest.raises(ValueError, match='ignore_index=255'):
+        OccupancyLoss([OccFocalLoss()], ignore_index=200)
+
+
+def test_single_scale_terms_and_suffix():
+    """One key per term, the suffix appended, each the term's own value."""
+    gen = torch.Generator().manual_seed(0)
+    logits = torch.randn(2, 3, 4, 4, 2, generator=gen)
+    gt = torch.randint(0, 3, (2, 4, 4, 2), generator=gen)
+    loss = OccupancyLoss([dict(type='OccFocalLoss', gamma=0.0),
+                          dict(type='OccLovaszLoss')])
+    terms = loss(logits, gt, suffix='_teacher')
+    assert list(terms) == ['loss_focal_teacher', 'loss_lovasz_teacher']
+    ref = torch.nn.functional.cross_entropy(logits, gt)
+    assert terms['loss_focal_teacher'].item() == pytest.approx(ref.item())
+
+
+def test_term_name():
+    """loss_name wins; otherwise the snake-cased class without 'Loss'."""
+
+    class MyThingLoss(torch.nn.Module):
+        pass
+
+    assert term_name(OccFocalLoss()) == 'loss_focal'
+    assert term_name(SceneClassAffinityLoss(mode='geo')) == 'loss_geo_scal'
+    assert term_name(MyThingLoss()) == 'loss_my_thing'

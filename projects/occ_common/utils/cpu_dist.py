@@ -3,8 +3,10 @@
 mmengine 0.10.7 assumes CUDA under ``--launcher pytorch``: its
 ``init_dist`` calls ``torch.cuda.set_device`` and the Runner wraps the model
 in DDP with ``device_ids=[LOCAL_RANK]``, which DDP refuses for CPU modules.
-These helpers live beside the tools (not in the plugin packages, which the
-tools must not import) and do nothing on CUDA machines.
+These helpers do nothing on CUDA machines. They live in the package (not
+beside the tools) so that the tools import them like any installed module,
+whatever the working directory; the models still come from each config's
+``custom_imports``.
 """
 import logging
 import os

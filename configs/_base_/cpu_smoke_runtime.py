@@ -1,0 +1,7 @@
+# default_runtime.py for the tiny CPU configs: a log line per iteration, one
+# checkpoint kept (a config saves it at its last epoch) and a fixed seed.
+_base_ = ['./default_runtime.py']
+
+default_hooks = dict(
+    logger=dict(interval=1), checkpoint=dict(max_keep_ckpts=1))
+randomness = dict(seed=0)

@@ -1,0 +1,109 @@
+# What every nuScenes occupancy dataset base shares: the cameras, sweeps,
+# loaders and image augmentation, the dataloaders and the metric. Not a
+# config on its own: occ3d-nus.py and surroundocc-nus.py add the label
+# format, its grid and classes, and assemble the pipelines from the pieces
+# below (a base's values are fixed when it is read, so the pieces that
+# depend on the grid are built there, not here).
+# Prepare the data with (see projects/occ_common/datasets/README.md):
+#   python tools/create_data.py nuscenes --root-path data/nuscenes \
+#       --version v1.0-trainval
+custom_imports = dict(
+    imports=['projects.occ_common'], allow_failed_imports=False)
+
+data_root = 'data/nuscenes/'
+info_prefix = 'nuscenes_occ'
+cam_names = [
+    'CAM_FRONT', 'CAM_FRONT_RIGHT', 'CAM_FRONT_LEFT', 'CAM_BACK',
+    'CAM_BACK_LEFT', 'CAM_BACK_RIGHT'
+]
+# Network input (H, W): BEVDet's 256x704 crop of the 900x1600 images.
+img_size = (256, 704)
+# nuScenes' usual 10 earlier sweeps (0.5 s of LiDAR at 20 Hz).
+sweeps_num = 10
+dataset_type = 'NuScenesOccDataset'
+backend_args = None
+
+# Points carry x, y, z, intensity, time lag (the ring index of the files is
+# replaced by the time lag when the sweeps are merged).
+_load_points = [
+    dict(
+        type='LoadOccPointsFromFile',
+        coord_type='LIDAR',
+        load_dim=5,
+        use_dim=5,
+        backend_args=backend_args),
+    # Needs nuScenes-lidarseg; without it drop this and PointsToSemanticMaps.
+    dict(type='LoadLidarSegLabels', backend_args=backend_args),
+]
+_sweeps = dict(
+    type='LoadOccPointsFromMultiSweeps',
+    sweeps_num=sweeps_num,
+    load_dim=5,
+    use_dim=[0, 1, 2, 3, 4],
+    # The car's own body returns would otherwise fill the centre voxels.
+    remove_close=True,
+    backend_args=backend_args)
+_images = dict(
+    type='LoadMultiViewImagesOcc',
+    cam_names=cam_names,
+    backend_args=backend_args)
+# Up to the occupancy labels: points, sweeps, images and (training) BEVDet's
+# image augmentation, +-6 % scale, random horizontal crop, flips and
+# +-5.4 deg rotation.
+train_inputs = _load_points + [
+    _sweeps,
+    _images,
+    dict(
+        type='MultiViewImageAug',
+        final_size=img_size,
+        resize_range=(0.94, 1.06),
+        crop_x_range=(0.0, 1.0),
+        crop_y_range=(1.0, 1.0),
+        flip_prob=0.5,
+        rot_range=(-5.4, 5.4)),
+]
+test_inputs = _load_points + [
+    dict(_sweeps, test_mode=True),
+    _images,
+    dict(type='MultiViewImageAug', final_size=img_size, test_mode=True),
+]
+# After the labels: BEV flips only (exact on the grid; other angles would
+# resample labels), then the depth and 2D semantic targets of the cameras.
+train_targets = [
+    dict(type='OccBEVAug', flip_x_prob=0.5, flip_y_prob=0.5),
+    dict(type='PointsToDepthMaps'),
+    dict(type='PointsToSemanticMaps'),
+]
+test_targets = [
+    dict(type='OccBEVAug', test_mode=True),
+    dict(type='PointsToDepthMaps'),
+    dict(type='PointsToSemanticMaps'),
+]
+
+_dataset = dict(
+    type=dataset_type,
+    data_root=data_root,
+    cam_names=cam_names,
+    backend_args=backend_args)
+train_dataloader = dict(
+    batch_size=1,
+    num_workers=4,
+    persistent_workers=True,
+    sampler=dict(type='DefaultSampler', shuffle=True),
+    dataset=dict(
+        _dataset, ann_file=f'{info_prefix}_infos_train.pkl', test_mode=False))
+val_dataloader = dict(
+    batch_size=1,
+    num_workers=4,
+    persistent_workers=True,
+    drop_last=False,
+    sampler=dict(type='DefaultSampler', shuffle=False),
+    dataset=dict(
+        _dataset, ann_file=f'{info_prefix}_infos_val.pkl', test_mode=True))
+test_dataloader = val_dataloader
+
+val_evaluator = dict(
+    type='OccupancyMetric',
+    # OccCylindrical Tables II-III report rainy and night scenes.
+    subsets=['rainy', 'night'])
+test_evaluator = val_evaluator

@@ -1,0 +1,146 @@
+# SDG-Fusion (SDG-OCC, Duan et al., CVPR 2025) without a dataset: ResNet50
+# + FPN at 1/16 of the images, multi-task DepthNet, SDG view transform,
+# SPVCNN LiDAR BEV, LiDAR-dominant neighbourhood-attention fusion, BEV
+# encoder and FlashOcc's channel-to-height head; AdamW 1e-4 with gradient
+# clipping. A config adds a dataset base and sets the coupled values on
+# `model` from it (point_cloud_range, voxel_size, num_classes, empty_index)
+# and the depth bins that cover its grid: the detector hands them to the
+# modules that need them. `kl_model` turns it into SDG-KL.
+_base_ = ['../../_base_/schedules/adamw-24e.py']
+
+_img_stride = 16  # image features at 1/16 (paper)
+# 2D semantic classes: 0 background (cells no labelled return hits), then
+# the 16 lidarseg classes as projected by PointsToSemanticMaps.
+_num_seg_classes = 17
+_point_dims = 5  # x, y, z, intensity, time lag of the merged sweeps
+# Channel widths (not fixed by the paper): BEVDet-Occ / FlashOcc's 64-channel
+# camera BEV, 256-channel image and head features; the SPVCNN encoder's
+# default 128-channel LiDAR BEV.
+_img_channels = 256
+_cam_channels = 64
+_lidar_channels = 128
+_bev_channels = 256
+
+model = dict(
+    type='SDGOcc',
+    variant='fusion',
+    data_preprocessor=dict(
+        type='Det3DDataPreprocessor',
+        # ImageNet statistics, matching the pretrained backbone.
+        mean=[123.675, 116.28, 103.53],
+        std=[58.395, 57.12, 57.375],
+        bgr_to_rgb=True,
+        pad_size_divisor=32),
+    downsample=_img_stride,
+    img_backbone=dict(
+        type='mmdet.ResNet',
+        depth=50,
+        num_stages=4,
+        out_indices=(2, 3),
+        # Whole backbone trained with live BN statistics, as BEVDet-Occ.
+        frozen_stages=-1,
+        norm_cfg=dict(type='BN', requires_grad=True),
+        norm_eval=False,
+        style='pytorch',
+        # ImageNet weights, as BEVDet-Occ; set to None to train from scratch.
+        init_cfg=dict(type='Pretrained', checkpoint='torchvision://resnet50')),
+    img_neck=dict(
+        type='mmdet.FPN',
+        in_channels=[1024, 2048],
+        out_channels=_img_channels,
+        num_outs=2),  # the 1/16 output (index 0) is used
+    depth_net=dict(
+        type='DepthNet',
+        in_channels=_img_channels,
+        mid_channels=_img_channels,
+        context_channels=_cam_channels,
+        # SDG-OCC's context is the plain texture branch (no eq. 5 terms).
+        with_depth_feature=False,
+        camera_param_dims=22,  # BEVDepth's camera-aware depth, as BEVDet
+        seg_channels=_num_seg_classes),
+    view_transform=dict(
+        type='SDGViewTransform',
+        # Semantic diffusion radius in 1/16 feature pixels (not fixed by the
+        # paper): 2 cells = 32 image pixels, about one object width at 20 m.
+        diffusion_radius=2.0,
+        # Bilinear incremental discretization: r = 1 m, 8 layers (paper,
+        # Table 4).
+        layer_radius=1.0,
+        num_layers=8,
+        fallback='lss',
+        use_sdg=True),
+    lidar_encoder=dict(
+        type='SPVCNNEncoder',
+        in_channels=_point_dims,
+        # SDG-OCC's 0.1 m voxels; two stride-2 stages reach Occ3D's 0.4 m
+        # BEV cell.
+        voxel_size=[0.1, 0.1, 0.1],
+        stage_strides=(2, 2),
+        out_channels=_lidar_channels),
+    fusion=dict(
+        type='NeighborhoodFusion',
+        source_channels=_lidar_channels,  # LiDAR-dominant: LiDAR queries
+        cross_channels=_cam_channels,
+        out_channels=_cam_channels,  # same width as the student camera BEV
+        # Attention width (not given by the paper): the camera BEV's 64
+        # channels in 4 heads of 16, NAT's head width.
+        embed_dims=64,
+        num_heads=4,
+        # Neighbourhood size of the fusion attention: k = 7 (paper,
+        # Table 5).
+        kernel_size=7),
+    bev_encoder=dict(
+        type='SDGBEVEncoder',
+        in_channels=_cam_channels,
+        # BEVDet's CustomResNet widths (2x, 4x, 8x the camera BEV).
+        stage_channels=[
+            _cam_channels * 2, _cam_channels * 4, _cam_channels * 8
+        ],
+        num_blocks=[2, 2, 2],  # BEVDet's two residual blocks per stage
+        out_channels=_bev_channels),
+    occ_head=dict(
+        type='ChannelToHeightHead',
+        in_channels=_bev_channels,
+        mid_channels=_bev_channels,
+        num_convs=1,  # FlashOcc's single 3x3 conv before the predictor
+        # FlashOcc's masked cross-entropy on Occ3D (focal with gamma = 0);
+        # add OccLovaszLoss / SceneClassAffinityLoss entries to use them.
+        loss_occ=dict(
+            type='OccupancyLoss',
+            losses=[dict(type='OccFocalLoss', gamma=0.0, loss_weight=1.0)])),
+    loss_depth=dict(
+        type='DepthBCELoss', downsample=_img_stride,
+        loss_weight=0.05),  # SDG-OCC's depth weight
+    loss_seg=dict(
+        type='mmdet.CrossEntropyLoss',
+        ignore_index=255,
+        avg_non_ignore=True,
+        loss_weight=0.5),  # not fixed by the paper; BEVDet-style aux weight
+    seg_empty_label=0)
+
+# SDG-KL: SDG-Fusion's network trained with the fusion as a teacher and FOAD
+# distillation into the camera BEV; inference skips the SPVCNN branch and
+# the fusion. The *sdgocc-kl_* configs merge it into `model`.
+kl_model = dict(
+    variant='kl',
+    # alpha, beta and the loss weight are not fixed by the paper: the
+    # N_AR / N_IR balance already equalises the two regions, so both
+    # regions start at weight 1.
+    loss_distill=dict(
+        type='FOADDistillLoss', alpha=1.0, beta=1.0, loss_weight=1.0),
+    # The teacher must learn occupancy for its features to be worth
+    # distilling; it gets the same weight as the student's head.
+    teacher_loss_weight=1.0)
+
+# Schedule: AdamW lr 1e-4 with gradient clipping (paper). The weight decay,
+# clip norm, warm-up and 24 epochs follow BEVDet-Occ / FlashOcc (not given
+# in the paper); 4 GPUs x 2 samples is an assumption, hence auto_scale_lr.
+optim_wrapper = dict(
+    optimizer=dict(lr=1e-4, weight_decay=1e-2),
+    clip_grad=dict(max_norm=5, norm_type=2))
+param_scheduler = [
+    dict(
+        type='LinearLR', start_factor=1e-3, by_epoch=False, begin=0,
+        end=200),
+]
+auto_scale_lr = dict(enable=False, base_batch_size=8)

@@ -1,1 +1,0 @@
-"""OpenMMLab mmdet3d plugins for multi-modal 3D semantic occupancy."""
