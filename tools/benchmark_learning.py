@@ -179,11 +179,31 @@ def set_iteration_budget(cfg, max_iters: Optional[int], val_interval: int,
     return max_iters
 
 
+def _initial_val_hook():
+    """A hook that validates the untrained model: iteration 0 of the curve.
+
+    It runs last among the ``before_train`` hooks: the weights are
+    initialised by then, and every hook that ``after_val_epoch`` reaches
+    (the checkpoint hook's best-checkpoint bookkeeping needs its file
+    backend, set in its own ``before_train``) is ready. Evaluating draws no
+    training randomness, so the training trajectory is unchanged; a resumed
+    run (iteration > 0) does not validate again."""
+    from mmengine.hooks import Hook
+
+    class InitialVal(Hook):
+        priority = 'LOWEST'
+
+        def before_train(self, runner):
+            if runner.iter == 0 and runner.val_loop is not None:
+                runner.val_loop.run()
+
+    return InitialVal()
+
+
 def _train_clock_hook(max_seconds: Optional[float], path: str):
-    """A hook that validates the untrained model (iteration 0 of the
-    curve), measures training time (validation excluded), stores it in every
-    checkpoint (so a resumed run keeps counting), writes it to ``path`` and
-    ends training after ``max_seconds``.
+    """A hook that measures training time (validation excluded), stores it
+    in every checkpoint (so a resumed run keeps counting), writes it to
+    ``path`` and ends training after ``max_seconds``.
 
     Besides wall time it sums the process's CPU time: on a machine shared
     with other jobs the wall time grows with the load, the CPU time (all
@@ -206,12 +226,6 @@ def _train_clock_hook(max_seconds: Optional[float], path: str):
                                iterations=runner.iter,
                                max_iters=runner.train_loop.max_iters,
                                stopped_by_time=self.stopped_by_time), f)
-
-        def before_train(self, runner):
-            # The untrained model's point of the curve: the weights are
-            # initialised by now, and evaluating draws no training RNG.
-            if runner.iter == 0 and runner.val_loop is not None:
-                runner.val_loop.run()
 
         def before_train_iter(self, runner, batch_idx, data_batch=None):
             if self.mark is None:
@@ -277,6 +291,7 @@ def train_one(spec: dict) -> None:
                    60.0 * spec['max_minutes'])
     runner.register_hook(
         _train_clock_hook(max_seconds, osp.join(work_dir, CLOCK)))
+    runner.register_hook(_initial_val_hook())
     evaluator = cfg.val_evaluator
     info = dict(
         labels=dict(surroundocc='SurroundOcc', occ3d='Occ3D').get(
