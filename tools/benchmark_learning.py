@@ -35,8 +35,10 @@ import os.path as osp
 import time
 from typing import Dict, List, Optional
 
-from occ_runs import (data_options, format_table, last_metrics, pct,
-                      prepare_world, read_json_lines, run, tool)
+from projects.occ_common.utils.tool_runs import (data_options, format_table,
+                                                 last_metrics, pct,
+                                                 prepare_world,
+                                                 read_json_lines, run, tool)
 
 #: Named runs: name -> (config, extra --cfg-options).
 RUNS = {

@@ -21,8 +21,9 @@ import os.path as osp
 import shutil
 import time
 
-from occ_runs import (data_options, format_table, last_metrics, pct,
-                      prepare_world, run, tool)
+from projects.occ_common.utils.tool_runs import (data_options, format_table,
+                                                 last_metrics, pct,
+                                                 prepare_world, run, tool)
 
 #: (name, config, label convention, epochs). The epochs fit the demo's
 #: 20-minute budget on 2 idle CPU cores (OccCylindrical ~2.5 s and SDG-Fusion

@@ -4,7 +4,6 @@ The training runs use the toy config (tests/data/configs/toy_occ.py: 8
 training samples in batches of 2, so 4 iterations per epoch) in child
 processes, exactly as the benchmark starts them.
 """
-import importlib.util
 import json
 import os.path as osp
 import subprocess
@@ -14,21 +13,15 @@ from types import SimpleNamespace
 import pytest
 from mmengine.config import Config
 
+from projects.occ_common.testing.tool_logs import load_tool
+from projects.occ_common.utils import tool_runs
+
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ.py')
 
 
-def _tool(name='benchmark_learning'):
-    """A script of tools/ as a module (tools/ on sys.path for its
-    imports, as when it runs as a script)."""
-    tools = osp.join(ROOT, 'tools')
-    if tools not in sys.path:
-        sys.path.insert(0, tools)
-    spec = importlib.util.spec_from_file_location(
-        f'{name}_tool', osp.join(tools, f'{name}.py'))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+def _tool():
+    return load_tool('benchmark_learning.py')
 
 
 def _epoch_cfg():
@@ -153,8 +146,8 @@ def test_world_with_other_parameters_is_refused(tmp_path):
     meta.write_text(json.dumps(dict(complete=True, parameters=dict(
         num_scenes=3, samples_per_scene=8, seed=0))))
     with pytest.raises(SystemExit, match='num_scenes'):
-        _tool('occ_runs').prepare_world(str(tmp_path), str(tmp_path / 'l'),
-                                        scenes=10, samples=8)
+        tool_runs.prepare_world(str(tmp_path), str(tmp_path / 'l'),
+                                scenes=10, samples=8)
 
 
 def test_format_table_extra_lines():
@@ -162,7 +155,7 @@ def test_format_table_extra_lines():
     rows = [dict(name='a', labels='Occ3D', train_s=90.0,
                  metrics={'occ/IoU': 50.0, 'occ/mIoU': 12.345,
                           'occ/car': float('nan')}, iterations=7)]
-    table = _tool('occ_runs').format_table(
+    table = tool_runs.format_table(
         rows, [('iterations', lambda r: str(r['iterations']))])
     assert table.splitlines() == [
         '| | a |', '|---|---|', '| labels | Occ3D |',

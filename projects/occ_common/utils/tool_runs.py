@@ -1,5 +1,8 @@
 """Steps shared by ``tools/demo.py`` and ``tools/benchmark_learning.py``.
 
+They live here, not in ``tools/``, because the tools import their helpers
+as installed packages (never from ``tools/`` on ``sys.path``).
+
 Both drive the user-facing tools (``create_synthetic_nuscenes.py``,
 ``create_data.py``, ``train.py``, ``test.py``) as subprocesses, read the
 metrics mmengine logged, and print a results table. Like the tools, this
@@ -12,7 +15,9 @@ import subprocess
 import sys
 from typing import Dict, List, Optional, Sequence
 
-ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+#: The repository root (projects/occ_common/utils/ -> three levels up).
+ROOT = osp.dirname(
+    osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__)))))
 #: The generator writes this file first and marks it complete at the end.
 WORLD_META = osp.join('synthetic_gt', 'meta.json')
 INFO_PREFIX = 'nuscenes_occ'
