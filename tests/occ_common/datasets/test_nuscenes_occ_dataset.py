@@ -339,3 +339,42 @@ def test_dataset_arguments(root, tmp_path):
     with pytest.raises(ValueError, match='18 classes'):
         DATASETS.build(dict(cfg, occ_format='occ3d',
                             metainfo=dict(classes=['a', 'b'])))
+
+
+@pytest.mark.filterwarnings('ignore:synthetic world with one scene')
+@pytest.mark.parametrize('fmt', ['surroundocc', 'occ3d'])
+def test_config_pipelines_drop_ego_returns(world_copy, fmt):
+    """Three returns off the car (the sensor, the bonnet, a mirror; ego
+    (0.985, 0, 1.94), (3.485, 0, 0.94), (1.485, -1.05, 0.84)) added to
+    the key frame and to its newest sweep of a one-scene world (which has
+    no ego returns of its own): the base test pipeline gives exactly the
+    points it gave before, and no key-frame point lies in the ego box.
+    (Sweep points may: the ground the car has since driven onto.) The old
+    pipeline kept all three key-frame returns and the sweep's bonnet and
+    mirror returns (its remove_close is a 1 m sphere)."""
+    from projects.occ_common.transforms.ego_points import in_ego_box
+    info = mmengine.load(
+        osp.join(world_copy, 'nuscenes_occ_infos_val.pkl'))['data_list'][0]
+
+    def points():
+        sample = build_dataset(world_copy, fmt, split='val')[0]
+        return (sample['inputs']['points'].numpy(),
+                sample['data_samples'].metainfo['lidar2ego'])
+
+    before, _ = points()
+    car = np.array([[0, 0, 0.1, 1, 0], [0, 2.5, -0.9, 1, 0],
+                    [1.05, 0.5, -1.0, 1, 0]], np.float32)
+    for rel in (info['lidar_points']['lidar_path'],
+                info['lidar_sweeps'][0]['lidar_points']['lidar_path']):
+        path = osp.join(world_copy, rel)
+        np.concatenate([np.fromfile(path, np.float32), car.ravel()]).tofile(
+            path)
+    labels = osp.join(world_copy, info['pts_semantic_mask_path'])
+    np.concatenate([np.fromfile(labels, np.uint8),
+                    np.zeros(3, np.uint8)]).tofile(labels)
+    after, lidar2ego = points()
+    np.testing.assert_array_equal(after, before)
+    key = after[after[:, 4] == 0, :3]
+    # The working frame -> ego: lidar2ego (the identity for Occ3D).
+    assert not in_ego_box(key, lidar2ego,
+                          (-0.9, -1.1, -0.5, 3.7, 1.1, 2.2)).any()
