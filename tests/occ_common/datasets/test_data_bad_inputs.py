@@ -35,10 +35,14 @@ def root(world_copy):
     return world_copy
 
 
-def dataset(root, fmt='surroundocc'):
+def dataset(root, fmt='surroundocc', seg2d=False):
+    """The base config's training dataset (``seg2d``: the pipeline that
+    reads lidarseg) on ``root``."""
     cfg = Config.fromfile(
         osp.join(REPO, 'configs', '_base_', 'datasets', f'{fmt}-nus.py'))
     ds_cfg = cfg.train_dataloader.dataset
+    if seg2d:
+        ds_cfg.pipeline = cfg.train_pipeline_seg2d
     ds_cfg.data_root = root
     return DATASETS.build(ds_cfg)
 
@@ -81,7 +85,7 @@ def test_missing_label_files(root, key):
     fmt = 'occ3d' if key == 'occ_occ3d_path' else 'surroundocc'
     with pytest.raises(FileNotFoundError,
                        match=re.escape(osp.basename(path))):
-        dataset(root, fmt)[0]
+        dataset(root, fmt, seg2d=key == 'pts_semantic_mask_path')[0]
     with pytest.raises(FileNotFoundError,
                        match=re.escape(osp.basename(path))):
         create_data('--root-path', root, '--overwrite')
@@ -150,7 +154,7 @@ def test_zero_lidar_points_is_handled(root):
         osp.join(root, info['lidar_points']['lidar_path']))
     np.zeros(0, np.uint8).tofile(
         osp.join(root, info['pts_semantic_mask_path']))
-    sample = dataset(root)[0]
+    sample = dataset(root, seg2d=True)[0]
     ds = sample['data_samples']
     assert not ds.gt_depth.any() and (ds.gt_seg_2d == 255).all()
     assert (sample['inputs']['points'][:, 4] > 0).all()
