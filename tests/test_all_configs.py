@@ -70,3 +70,20 @@ def test_readme_names_only_existing_configs():
     paths = set(re.findall(r'configs/[\w/.-]+\.py', readme))
     missing = [p for p in paths if not osp.isfile(osp.join(ROOT, p))]
     assert missing == []
+
+
+@pytest.mark.parametrize('path', CONFIGS, ids=osp.basename)
+def test_only_sdg_configs_read_lidarseg(path):
+    """nuScenes-lidarseg is optional: OccCylindrical's configs never load
+    it nor make 2-D semantic maps; SDG-OCC's make them (from lidarseg
+    where the info has it, else from the occupancy labels). Both drop the
+    ego vehicle's returns."""
+    cfg = Config.fromfile(path)
+    sdg = osp.basename(path).startswith('sdgocc')
+    for loader in (cfg.train_dataloader, cfg.test_dataloader):
+        steps = {t['type']: t for t in loader.dataset.pipeline}
+        assert ('LoadLidarSegLabels' in steps) == sdg
+        assert ('PointsToSemanticMaps' in steps) == sdg
+        assert 'RemoveEgoPoints' in steps
+        if sdg:
+            assert steps['LoadLidarSegLabels']['optional']

@@ -9,11 +9,18 @@ Usage (mmdet3d 1.x ``tools/create_data.py`` style)::
     # a synthetic world (tools/create_synthetic_nuscenes.py)
     python tools/create_data.py nuscenes --root-path data/synthetic_nuscenes \\
         --version v1.0-mini
+    # mmdet3d's own info files, extended with the occupancy label paths
+    python tools/create_data.py nuscenes --root-path data/nuscenes \\
+        --from-mmdet3d-info data/nuscenes/nuscenes_infos_val.pkl
 
 Writes ``<out-dir>/<extra-tag>_infos_{train,val,val_rainy,val_night}.pkl``
-(``v1.0-test``: ``_infos_test.pkl``); existing files are kept unless
-``--overwrite``. The conversion itself lives in
-``projects/occ_common/datasets/converters/nuscenes_occ_converter.py``.
+(``v1.0-test``: ``_infos_test.pkl``; ``v1.0``, mmdet3d's default: both);
+existing files are kept unless ``--overwrite``. ``--from-mmdet3d-info``
+writes ``<extra-tag>_infos_<split>.pkl`` per given file instead. Problems
+that leave the rest usable (missing sweeps, a missing label file, a
+``panoptic.json`` without its files) are reported at the end, not fatal.
+The conversion itself lives in
+``projects/occ_common/datasets/converters/``.
 """
 import argparse
 
@@ -28,7 +35,8 @@ def parse_args(argv=None):
     parser.add_argument(
         '--version',
         default='v1.0-trainval',
-        help='nuScenes version (v1.0-trainval, v1.0-mini, v1.0-test)')
+        help='nuScenes version (v1.0-trainval, v1.0-mini, v1.0-test; '
+        'v1.0 = v1.0-trainval then v1.0-test, as in mmdet3d)')
     parser.add_argument(
         '--out-dir', help='where the info files go (default: root path)')
     parser.add_argument(
@@ -52,23 +60,54 @@ def parse_args(argv=None):
         '--overwrite',
         action='store_true',
         help='replace existing info files')
+    parser.add_argument(
+        '--workers',
+        type=int,
+        default=4,
+        help='processes that convert samples (0: this one)')
+    parser.add_argument(
+        '--from-mmdet3d-info',
+        nargs='+',
+        metavar='INFO_FILE',
+        help='extend these mmdet3d v2 info files with the occupancy label '
+        'paths instead of converting the nuScenes tables')
     return parser.parse_args(argv)
 
 
 def main(argv=None):
     """Run the converter and print the written files."""
     args = parse_args(argv)
-    from projects.occ_common.datasets.converters import nuscenes_occ_converter
-    written = nuscenes_occ_converter.create_nuscenes_occ_infos(
-        args.root_path,
-        out_dir=args.out_dir,
-        info_prefix=args.extra_tag,
-        version=args.version,
-        surroundocc_root=args.surroundocc_root,
-        occ3d_root=args.occ3d_root,
-        max_sweeps=args.max_sweeps,
-        val_scenes=args.val_scenes,
-        overwrite=args.overwrite)
+    from projects.occ_common.datasets.converters import (
+        extend_mmdet3d_infos, nuscenes_occ_converter)
+    labels = dict(
+        surroundocc_root=args.surroundocc_root, occ3d_root=args.occ3d_root)
+    written = {}
+    if args.from_mmdet3d_info:
+        for info_file in args.from_mmdet3d_info:
+            split, path = extend_mmdet3d_infos.extend_mmdet3d_info_file(
+                info_file,
+                args.root_path,
+                out_dir=args.out_dir,
+                info_prefix=args.extra_tag,
+                overwrite=args.overwrite,
+                **labels)
+            written[split] = path
+    else:
+        # mmdet3d's v1.0 is the trainval release and its test release.
+        versions = ['v1.0-trainval', 'v1.0-test'] \
+            if args.version == 'v1.0' else [args.version]
+        for version in versions:
+            written.update(
+                nuscenes_occ_converter.create_nuscenes_occ_infos(
+                    args.root_path,
+                    out_dir=args.out_dir,
+                    info_prefix=args.extra_tag,
+                    version=version,
+                    max_sweeps=args.max_sweeps,
+                    val_scenes=args.val_scenes,
+                    overwrite=args.overwrite,
+                    workers=args.workers,
+                    **labels))
     for split, path in written.items():
         print(f'{split}: {path}')
     return written

@@ -49,7 +49,8 @@ def main(argv=None):
         samples_per_scene=args.samples, sweeps_per_sample=args.sweeps,
         image_size=tuple(args.image_size), version=args.version,
         seed=args.seed, overwrite=args.overwrite,
-        azimuth_bins=args.azimuth_bins, conditions=args.conditions)
+        azimuth_bins=args.azimuth_bins, conditions=args.conditions,
+        progress=True)
     brief = {k: v for k, v in summary.items()
              if k not in ('paths', 'sample_tokens')}
     print(json.dumps(brief, indent=1))

@@ -18,4 +18,8 @@ model = dict(
     # at 0.5 m (88 bins); the paper does not list them.
     depth_bound=[1.0, 45.0, 0.5])
 
-train_dataloader = dict(batch_size=2)
+# The pipelines with the 2-D semantic targets of SDG's image branch.
+train_dataloader = dict(
+    batch_size=2, dataset=dict(pipeline=_base_.train_pipeline_seg2d))
+val_dataloader = dict(dataset=dict(pipeline=_base_.test_pipeline_seg2d))
+test_dataloader = val_dataloader

@@ -31,4 +31,8 @@ model = dict(
             dict(type='SceneClassAffinityLoss', mode='sem'),
         ])))
 
-train_dataloader = dict(batch_size=2)
+# The pipelines with the 2-D semantic targets of SDG's image branch.
+train_dataloader = dict(
+    batch_size=2, dataset=dict(pipeline=_base_.train_pipeline_seg2d))
+val_dataloader = dict(dataset=dict(pipeline=_base_.test_pipeline_seg2d))
+test_dataloader = val_dataloader

@@ -54,19 +54,21 @@ model = dict(
         out_channels=_bev_channels),
     occ_head=dict(in_channels=_bev_channels, mid_channels=_bev_channels))
 
-# The base pipelines with two CPU savings: 128x352 images (half the
-# paper's 256x704 per side) and key-frame points only (sweeps_num=0 keeps
-# the key frame and turns column 4 into time lag 0: ~10x fewer points for
-# the sparse convs).
+# The base pipelines with the 2-D semantic targets, with two CPU savings:
+# 128x352 images (half the paper's 256x704 per side) and key-frame points
+# only (sweeps_num=0 keeps the key frame and turns column 4 into time lag
+# 0: ~10x fewer points for the sparse convs).
 img_size = (128, 352)
 _smaller = dict(
     MultiViewImageAug=dict(final_size=img_size),
     LoadOccPointsFromMultiSweeps=dict(sweeps_num=0))
 train_pipeline = [
-    dict(t, **_smaller.get(t['type'], {})) for t in _base_.train_pipeline
+    dict(t, **_smaller.get(t['type'], {}))
+    for t in _base_.train_pipeline_seg2d
 ]
 test_pipeline = [
-    dict(t, **_smaller.get(t['type'], {})) for t in _base_.test_pipeline
+    dict(t, **_smaller.get(t['type'], {}))
+    for t in _base_.test_pipeline_seg2d
 ]
 train_dataloader = dict(dataset=dict(pipeline=train_pipeline))
 val_dataloader = dict(dataset=dict(pipeline=test_pipeline))

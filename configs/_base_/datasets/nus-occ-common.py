@@ -23,25 +23,34 @@ sweeps_num = 10
 dataset_type = 'NuScenesOccDataset'
 backend_args = None
 
+# The ego vehicle (x0, y0, z0, x1, y1, z1) in the ego frame: the nuScenes
+# Renault Zoe with a margin (projects/occ_common/transforms/ego_points.py).
+# Its own returns (a quarter of a real key frame, all in the centre voxels
+# that the labels mark empty) are removed from the key frame and from every
+# sweep, each in its own sensor frame.
+ego_box = [-0.9, -1.1, -0.5, 3.7, 1.1, 2.2]
 # Points carry x, y, z, intensity, time lag (the ring index of the files is
 # replaced by the time lag when the sweeps are merged).
-_load_points = [
-    dict(
-        type='LoadOccPointsFromFile',
-        coord_type='LIDAR',
-        load_dim=5,
-        use_dim=5,
-        backend_args=backend_args),
-    # Needs nuScenes-lidarseg; without it drop this and PointsToSemanticMaps.
-    dict(type='LoadLidarSegLabels', backend_args=backend_args),
-]
+_key_frame = dict(
+    type='LoadOccPointsFromFile',
+    coord_type='LIDAR',
+    load_dim=5,
+    use_dim=5,
+    backend_args=backend_args)
+_remove_ego = dict(type='RemoveEgoPoints', ego_box=ego_box)
+# nuScenes-lidarseg point labels, for the 2-D semantic targets only
+# (PointsToSemanticMaps, the *_seg2d pipelines of SDG-OCC): loaded where the
+# info file has them, else those targets come from the occupancy labels.
+_lidarseg = dict(
+    type='LoadLidarSegLabels', optional=True, backend_args=backend_args)
 _sweeps = dict(
     type='LoadOccPointsFromMultiSweeps',
     sweeps_num=sweeps_num,
     load_dim=5,
     use_dim=[0, 1, 2, 3, 4],
-    # The car's own body returns would otherwise fill the centre voxels.
-    remove_close=True,
+    # The box, not mmdet3d's remove_close (a 1 m sphere round the sensor
+    # that misses the bonnet).
+    ego_box=ego_box,
     backend_args=backend_args)
 _images = dict(
     type='LoadMultiViewImagesOcc',
@@ -50,7 +59,9 @@ _images = dict(
 # Up to the occupancy labels: points, sweeps, images and (training) BEVDet's
 # image augmentation, +-6 % scale, random horizontal crop, flips and
 # +-5.4 deg rotation.
-train_inputs = _load_points + [
+train_inputs = [
+    _key_frame,
+    _remove_ego,
     _sweeps,
     _images,
     dict(
@@ -62,7 +73,9 @@ train_inputs = _load_points + [
         flip_prob=0.5,
         rot_range=(-5.4, 5.4)),
 ]
-test_inputs = _load_points + [
+test_inputs = [
+    _key_frame,
+    _remove_ego,
     dict(_sweeps, test_mode=True),
     _images,
     dict(type='MultiViewImageAug', final_size=img_size, test_mode=True),
@@ -72,13 +85,17 @@ test_inputs = _load_points + [
 train_targets = [
     dict(type='OccBEVAug', flip_x_prob=0.5, flip_y_prob=0.5),
     dict(type='PointsToDepthMaps'),
-    dict(type='PointsToSemanticMaps'),
 ]
 test_targets = [
     dict(type='OccBEVAug', test_mode=True),
     dict(type='PointsToDepthMaps'),
-    dict(type='PointsToSemanticMaps'),
 ]
+# The same with SDG-OCC's 2-D semantic targets (the lidarseg labels are
+# loaded before the ego points go, so that they stay aligned).
+train_inputs_seg2d = [_key_frame, _lidarseg] + train_inputs[1:]
+test_inputs_seg2d = [_key_frame, _lidarseg] + test_inputs[1:]
+train_targets_seg2d = train_targets + [dict(type='PointsToSemanticMaps')]
+test_targets_seg2d = test_targets + [dict(type='PointsToSemanticMaps')]
 
 _dataset = dict(
     type=dataset_type,

@@ -41,6 +41,13 @@ train_pipeline = (
     _base_.train_inputs + _labels + _base_.train_targets + _crop_and_pack)
 test_pipeline = (
     _base_.test_inputs + _labels + _base_.test_targets + _crop_and_pack)
+# With the 2-D semantic targets (gt_seg_2d) of SDG-OCC.
+train_pipeline_seg2d = (
+    _base_.train_inputs_seg2d + _labels + _base_.train_targets_seg2d +
+    _crop_and_pack)
+test_pipeline_seg2d = (
+    _base_.test_inputs_seg2d + _labels + _base_.test_targets_seg2d +
+    _crop_and_pack)
 
 _dataset = dict(occ_format=occ_format, metainfo=dict(classes=class_names))
 train_dataloader = dict(dataset=dict(_dataset, pipeline=train_pipeline))

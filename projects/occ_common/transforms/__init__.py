@@ -1,6 +1,7 @@
 """Data transforms of the occupancy plugins (registered in TRANSFORMS)."""
 from .bev_aug import OccBEVAug
 from .depth_maps import PointsToDepthMaps, PointsToSemanticMaps
+from .ego_points import RemoveEgoPoints
 from .formatting import PackOccInputs
 from .frames import PointsToEgoFrame
 from .image_aug import MultiViewImageAug
@@ -12,5 +13,5 @@ __all__ = [
     'LoadOccPointsFromFile', 'LoadOccPointsFromMultiSweeps',
     'LoadMultiViewImagesOcc', 'LoadOccupancyGT', 'LoadLidarSegLabels',
     'MultiViewImageAug', 'PointsToDepthMaps', 'PointsToSemanticMaps',
-    'OccBEVAug', 'PointsToEgoFrame', 'PackOccInputs'
+    'OccBEVAug', 'PointsToEgoFrame', 'PackOccInputs', 'RemoveEgoPoints'
 ]

@@ -11,10 +11,12 @@ from typing import Optional
 import numpy as np
 from mmcv.transforms import BaseTransform
 from mmdet3d.registry import TRANSFORMS
+from mmengine.logging import print_log
 
 from ..datasets.occ_formats import IGNORE_INDEX
 from ..geometry.depth import project_nearest
 from .frames import points_xyz
+from .point_labels import occupancy_point_labels
 
 
 def _key_frame(results: dict) -> np.ndarray:
@@ -106,6 +108,13 @@ class PointsToSemanticMaps(BaseTransform):
     sweep points after ``LoadOccPointsFromMultiSweeps``) are skipped, so
     they never hide a labelled point behind them.
 
+    The point labels are nuScenes-lidarseg's (``pts_semantic_mask``) when
+    the pipeline loaded them. Without lidarseg (the info file has none) the
+    key-frame points take the label of the occupancy voxel they fall in
+    (``gt_occ``, see :mod:`.point_labels` for why points and not voxel
+    rays); the first such sample of a process logs it. With neither (a
+    split without labels) no map is made, logged once as well.
+
     Args:
         ignore_index (int): Label of unlabelled pixels and points.
             Defaults to 255.
@@ -114,13 +123,18 @@ class PointsToSemanticMaps(BaseTransform):
     Required Keys:
 
     - points (BasePoints | np.ndarray): Working frame.
-    - pts_semantic_mask (np.ndarray): Shape (P,), aligned with points.
+    - pts_semantic_mask (np.ndarray, optional): Shape (P,), aligned with
+      points.
+    - gt_occ, occ_pc_range, occ_voxel_size (np.ndarray, optional): The
+      occupancy labels (``LoadOccupancyGT``), without lidarseg.
+    - points_time_dim (int, optional): Column of the time lag.
     - lidar2img (np.ndarray): (N, 4, 4).
     - img_shape (tuple[int, int]): (H, W).
 
     Added Keys:
 
     - gt_seg_2d (np.ndarray): Shape (N, H, W), uint8.
+    - seg_2d_source (str): ``'lidarseg'`` or ``'occupancy'``.
     """
 
     def __init__(self,
@@ -128,6 +142,8 @@ class PointsToSemanticMaps(BaseTransform):
                  min_depth: float = 1e-3) -> None:
         self.ignore_index = ignore_index
         self.min_depth = min_depth
+        # Per instance, so per dataloader worker: each logs once.
+        self._logged = set()
 
     def transform(self, results: dict) -> dict:
         """Build the semantic maps of one sample.
@@ -138,9 +154,11 @@ class PointsToSemanticMaps(BaseTransform):
         Returns:
             dict: The state with ``gt_seg_2d``.
         """
+        labels = self._point_labels(results)
+        if labels is None:
+            return results
         height, width = results['img_shape']
         lidar2img = np.asarray(results['lidar2img'])
-        labels = np.asarray(results['pts_semantic_mask'])
         if len(labels) != len(results['points']):
             raise ValueError(
                 f'pts_semantic_mask has {len(labels)} labels but there are '
@@ -156,6 +174,44 @@ class PointsToSemanticMaps(BaseTransform):
         out[view, row, col] = labels[keep][index]
         results['gt_seg_2d'] = out
         return results
+
+    def _point_labels(self, results: dict) -> Optional[np.ndarray]:
+        """lidarseg's point labels, else the occupancy grid's, else None.
+
+        Args:
+            results (dict): Pipeline state.
+
+        Returns:
+            np.ndarray | None: Shape (P,), aligned with ``points``.
+        """
+        if 'pts_semantic_mask' in results:
+            results['seg_2d_source'] = 'lidarseg'
+            return np.asarray(results['pts_semantic_mask'])
+        if 'gt_occ' not in results:
+            self._log_once(
+                'no_labels', 'PointsToSemanticMaps: sample '
+                f'{results.get("token", "?")} has neither lidarseg nor '
+                'occupancy labels: no 2-D semantic targets (gt_seg_2d)')
+            return None
+        self._log_once(
+            'occupancy', 'PointsToSemanticMaps: no nuScenes-lidarseg in '
+            f'{results.get("ann_file", "the info file")}: the 2-D semantic '
+            'targets come from the occupancy labels (each key-frame point '
+            'takes the label of its voxel)')
+        results['seg_2d_source'] = 'occupancy'
+        key = _key_frame(results)
+        labels = np.full(len(key), self.ignore_index, np.int64)
+        labels[key] = occupancy_point_labels(
+            points_xyz(results['points'], key), results['gt_occ'],
+            results['occ_pc_range'], results['occ_voxel_size'],
+            self.ignore_index)
+        return labels
+
+    def _log_once(self, what: str, message: str) -> None:
+        """Log ``message`` the first time ``what`` happens in a process."""
+        if what not in self._logged:
+            self._logged.add(what)
+            print_log(message, logger='current')
 
     def __repr__(self) -> str:
         """str: The transform and its arguments."""

@@ -181,11 +181,16 @@ class LoadLidarSegLabels(BaseTransform):
 
     Args:
         ignore_index (int): Label of ignored points. Defaults to 255.
+        optional (bool): A sample whose info has no lidarseg label (the
+            converter found no nuScenes-lidarseg) passes unchanged, and
+            ``PointsToSemanticMaps`` takes its labels from the occupancy
+            grid. A label the info names but that is missing stays an
+            error. Defaults to False (every sample must have one).
         backend_args (dict, optional): mmengine file backend arguments.
 
     Required Keys:
 
-    - pts_semantic_mask_path (str)
+    - pts_semantic_mask_path (str | None)
     - points (BasePoints, optional): Key frame, to check the count.
 
     Added Keys:
@@ -195,8 +200,10 @@ class LoadLidarSegLabels(BaseTransform):
 
     def __init__(self,
                  ignore_index: int = IGNORE_INDEX,
+                 optional: bool = False,
                  backend_args: Optional[dict] = None) -> None:
         self.ignore_index = ignore_index
+        self.optional = optional
         self.backend_args = backend_args
 
     def transform(self, results: dict) -> dict:
@@ -209,6 +216,8 @@ class LoadLidarSegLabels(BaseTransform):
             dict: The state with ``pts_semantic_mask``.
         """
         path = results.get('pts_semantic_mask_path')
+        if path is None and self.optional:
+            return results
         if path is None:
             raise ValueError(
                 f'sample {results.get("token", "?")} has no lidarseg label in'
@@ -228,4 +237,5 @@ class LoadLidarSegLabels(BaseTransform):
 
     def __repr__(self) -> str:
         """str: The transform and its arguments."""
-        return f'{self.__class__.__name__}(ignore_index={self.ignore_index})'
+        return (f'{self.__class__.__name__}(ignore_index={self.ignore_index}'
+                f', optional={self.optional})')

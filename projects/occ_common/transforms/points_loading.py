@@ -10,13 +10,15 @@ key frame with the exact inverse of ``lidar2sensor``. mmdet3d 1.4's
 ``(R^T - I) t``, which grows with the ego's turn rate and speed (about
 0.5 m for a 10 m/s car turning at 0.1 rad/s, 0.5 s back).
 """
-from typing import Optional
+from typing import Optional, Sequence
 
 import numpy as np
 from mmdet3d.datasets.transforms import (LoadPointsFromFile,
                                          LoadPointsFromMultiSweeps)
 from mmdet3d.registry import TRANSFORMS
 from mmengine.fileio import get
+
+from .ego_points import check_ego_box, remove_ego_from_sweep
 
 
 def read_points_file(path: str,
@@ -92,6 +94,9 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
     * sweep points go to the key frame with ``sensor2lidar`` (or the exact
       inverse of ``lidar2sensor``), see the module docstring;
     * missing / truncated sweep files raise an error naming the file;
+    * ``ego_box`` removes the ego vehicle's returns from every sweep in its
+      own sensor frame (see :mod:`.ego_points`), a box round the car where
+      ``remove_close`` is a 1 m sphere round the sensor;
     * a key-frame ``pts_semantic_mask`` is padded with ``ignore_index``
       for the sweep points, so that it stays aligned with ``points``.
 
@@ -102,6 +107,11 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
             (x, y, z, intensity, time lag).
         ignore_index (int): Label of sweep points in
             ``pts_semantic_mask``. Defaults to 255.
+        ego_box (Sequence[float], optional): ``(x0, y0, z0, x1, y1, z1)``
+            in the ego frame: sweep points inside are dropped. A sweep's
+            ``lidar_points.lidar2ego`` places it (the key frame's
+            ``lidar2ego`` when the sweep has none: one sensor, one mount).
+            Defaults to None (kept).
         **kwargs: ``backend_args``, ``pad_empty_sweeps``, ``remove_close``,
             ``test_mode`` of the parent.
 
@@ -110,7 +120,9 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
     - points (BasePoints): Key frame, at least 5 columns.
     - timestamp (float): Key-frame time in seconds.
     - lidar_sweeps (list[dict], optional): ``lidar_points.lidar_path``,
-      ``lidar_points.lidar2sensor`` (or ``sensor2lidar``), ``timestamp``.
+      ``lidar_points.lidar2sensor`` (or ``sensor2lidar``), ``timestamp``
+      (and ``lidar_points.lidar2ego`` for ``ego_box``).
+    - lidar2ego (np.ndarray, optional): Shape (4, 4), for ``ego_box``.
     - pts_semantic_mask (np.ndarray, optional): Shape (P_key,).
 
     Modified Keys:
@@ -129,6 +141,7 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
                  load_dim: int = 5,
                  use_dim=(0, 1, 2, 3, 4),
                  ignore_index: int = 255,
+                 ego_box: Optional[Sequence[float]] = None,
                  **kwargs) -> None:
         super().__init__(
             sweeps_num=sweeps_num,
@@ -136,6 +149,7 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
             use_dim=list(use_dim),
             **kwargs)
         self.ignore_index = ignore_index
+        self.ego_box = None if ego_box is None else check_ego_box(ego_box)
 
     @staticmethod
     def sweep_to_key(sweep: dict) -> np.ndarray:
@@ -202,6 +216,12 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
                 if self.remove_close:
                     # In the sweep's own frame, where "close" means the car.
                     arr = self._remove_close(arr)
+                if self.ego_box is not None:
+                    arr = remove_ego_from_sweep(
+                        arr,
+                        sweep['lidar_points'].get('lidar2ego',
+                                                  results.get('lidar2ego')),
+                        self.ego_box)
                 mat = self.sweep_to_key(sweep).astype(np.float32)
                 arr[:, :3] = arr[:, :3] @ mat[:3, :3].T + mat[:3, 3]
                 arr[:, 4] = key_time - sweep['timestamp']
@@ -223,4 +243,4 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
         return (f'{self.__class__.__name__}(sweeps_num={self.sweeps_num}, '
                 f'load_dim={self.load_dim}, use_dim={self.use_dim}, '
                 f'remove_close={self.remove_close}, '
-                f'test_mode={self.test_mode})')
+                f'ego_box={self.ego_box}, test_mode={self.test_mode})')

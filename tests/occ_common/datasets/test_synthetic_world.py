@@ -653,14 +653,18 @@ def test_bad_arguments_and_existing_data_raise(tmp_path):
 
 
 def test_command_line(tmp_path, capsys):
-    """The CLI writes the world and prints its summary as JSON."""
+    """The CLI writes the world, shows the progress of its sweeps on
+    stderr (1 scene: 10 sweeps before the first key frame, then 1: 11)
+    and prints its summary as JSON on stdout."""
     tool = runpy.run_path(osp.join(ROOT, 'tools',
                                    'create_synthetic_nuscenes.py'))
     out = str(tmp_path / 'cli')
     tool['main']([out, '--scenes', '1', '--samples', '1', '--sweeps', '2',
                   '--image-size', '32', '18', '--azimuth-bins', '16',
                   '--seed', '3'])
-    summary = json.loads(capsys.readouterr().out)
+    captured = capsys.readouterr()
+    summary = json.loads(captured.out)
+    assert '11/11' in captured.err
     assert summary['num_samples'] == 1 and summary['num_images'] == 6
     assert summary['seed'] == 3
     assert osp.isfile(osp.join(out, 'v1.0-mini', 'scene.json'))

@@ -77,3 +77,42 @@ def test_label_count_mismatch():
     state.update(pts_semantic_mask=np.zeros(3, np.int64), token='s7')
     with pytest.raises(ValueError, match='3 labels but there are 6.*s7'):
         PointsToSemanticMaps()(state)
+
+
+def test_semantic_maps_from_occupancy_without_lidarseg(monkeypatch):
+    """No ``pts_semantic_mask``: the key-frame points take their voxel's
+    label. A grid of 1 m voxels over x, y in [-1, 1), z in [0, 8): column
+    (x >= 0, y < 0) is car (4) up to z = 2, vegetation (16) above; the
+    rest is empty (0). Point 0 (0, 0, 2) is in voxel (1, 1, 2): empty ->
+    no label at pixel (2, 2), so point 1 (0, 0, 4) behind it, also empty,
+    leaves it 255; point 2 (0.5, -0.5, 1) is in (1, 0, 1): car -> pixel
+    (1, 3) = 4. The sweep point 5 (-0.5, 0.5, 1) would land on empty
+    anyway. Moving the car column to (x < 0, y >= 0) labels only the sweep
+    point's voxel, which stays unlabelled: key frame only. The fallback is
+    logged once, and lidarseg's labels win when both are there."""
+    from projects.occ_common.transforms import depth_maps
+    logged = []
+    monkeypatch.setattr(depth_maps, 'print_log',
+                        lambda msg, logger: logged.append(msg))
+    grid = np.zeros((2, 2, 8), np.uint8)
+    grid[1, 0, :2], grid[1, 0, 2:] = 4, 16
+    state = dict(_state(POINTS), gt_occ=grid,
+                 occ_pc_range=np.array([-1.0, -1, 0, 1, 1, 8]),
+                 occ_voxel_size=np.ones(3))
+    transform = PointsToSemanticMaps()
+    out = transform(dict(state))
+    seg = out['gt_seg_2d'][0]
+    assert out['seg_2d_source'] == 'occupancy'
+    assert seg[1, 3] == 4 and (seg != 255).sum() == 1
+    moved = np.zeros_like(grid)
+    moved[0, 1] = 4
+    assert (transform(dict(state, gt_occ=moved))['gt_seg_2d'] == 255).all()
+    assert len(logged) == 1 and 'occupancy labels' in logged[0]
+    both = transform(dict(state, pts_semantic_mask=np.full(6, 7)))
+    assert both['seg_2d_source'] == 'lidarseg'
+    assert both['gt_seg_2d'][0, 2, 2] == 7
+    # Neither source (a split without labels): no map, logged once.
+    bare = _state(POINTS)
+    assert 'gt_seg_2d' not in transform(bare)
+    transform(bare)
+    assert len(logged) == 2 and 'neither' in logged[1]

@@ -138,3 +138,17 @@ def test_lidarseg_labels(tmp_path):
     with pytest.raises(FileNotFoundError, match=r'none\.bin'):
         LoadLidarSegLabels()(
             dict(pts_semantic_mask_path=str(tmp_path / 'none.bin')))
+
+
+def test_lidarseg_labels_optional(tmp_path):
+    """optional=True: a sample without a lidarseg path passes unchanged
+    (no pts_semantic_mask); one whose label file is missing still names
+    it. Not optional: the missing path is an error naming the sample."""
+    state = dict(pts_semantic_mask_path=None, token='s3')
+    assert LoadLidarSegLabels(optional=True)(dict(state)) == state
+    with pytest.raises(ValueError, match='sample s3 has no lidarseg'):
+        LoadLidarSegLabels()(dict(state))
+    with pytest.raises(FileNotFoundError, match=r'gone\.bin'):
+        LoadLidarSegLabels(optional=True)(
+            dict(pts_semantic_mask_path=str(tmp_path / 'gone.bin')))
+    assert 'optional=True' in repr(LoadLidarSegLabels(optional=True))

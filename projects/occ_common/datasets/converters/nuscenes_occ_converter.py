@@ -23,19 +23,29 @@ Splits:
 Every file an info links (key frame, sweeps, images, lidarseg labels,
 occupancy labels) is checked to exist; an occupancy label folder that does
 not exist at all is recorded as ``None`` (with a warning) because users often
-have only one of SurroundOcc / Occ3D.
+have only one of SurroundOcc / Occ3D. A missing key frame or image stops
+the conversion; missing sweeps, a missing label file or a lidarseg /
+panoptic table without its files are reported at the end and the rest is
+converted (:mod:`.report` says why each is safe).
 """
-import json
+import multiprocessing
 import os
 import os.path as osp
+import shutil
+import sys
+import tempfile
 import warnings
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from ..info_format import (CAMERA_NAMES, INFO_VERSION, NUM_POINT_FEATS,
                            weather_flags)
 from ..nuscenes_classes import OCC_CLASS_NAMES
+from .devkit_view import devkit_view
+from .label_files import (exists_or_report, label_roots, occ_label_paths,
+                          rel_path)
+from .report import ConversionReport
 
 #: File that marks a root written by the synthetic world generator
 #: (``tools/create_synthetic_nuscenes.py``).
@@ -64,14 +74,6 @@ def pose_matrix(record: dict) -> np.ndarray:
     return mat
 
 
-def _rel(path: str, root: str) -> str:
-    """Path relative to ``root`` when it lies below it, else absolute."""
-    path, root = osp.abspath(path), osp.abspath(root)
-    if osp.commonpath([path, root]) == root:
-        return osp.relpath(path, root)
-    return path
-
-
 def _must_exist(path: str, what: str, sample_token: str) -> None:
     if not osp.isfile(path):
         raise FileNotFoundError(
@@ -89,6 +91,7 @@ class _Context:
         self.occ3d_root = occ3d_root
         self.max_sweeps = max_sweeps
         self.has_lidarseg = hasattr(nusc, 'lidarseg')
+        self.report = ConversionReport()
 
     def sensor2global(self, sd: dict) -> np.ndarray:
         cs = self.nusc.get('calibrated_sensor', sd['calibrated_sensor_token'])
@@ -109,14 +112,20 @@ def _sweeps(ctx: _Context, lidar_sd: dict, global2lidar: np.ndarray,
     while len(sweeps) < ctx.max_sweeps and sd['prev']:
         sd = nusc.get('sample_data', sd['prev'])
         path = osp.join(ctx.root, sd['filename'])
-        _must_exist(path, 'LiDAR sweep', sample_token)
+        if not osp.isfile(path):
+            # A keyframe-only download: keep the sweeps before the gap.
+            ctx.report.add(
+                'missing LiDAR sweeps (the sample keeps those before)',
+                f'sample {sample_token}: {len(sweeps)} of {ctx.max_sweeps}'
+                f', {path} missing')
+            break
         cs = nusc.get('calibrated_sensor', sd['calibrated_sensor_token'])
         ep = nusc.get('ego_pose', sd['ego_pose_token'])
         sensor2lidar = global2lidar @ pose_matrix(ep) @ pose_matrix(cs)
         sweeps.append(
             dict(
                 lidar_points=dict(
-                    lidar_path=_rel(path, ctx.root),
+                    lidar_path=rel_path(path, ctx.root),
                     lidar2ego=pose_matrix(cs).tolist(),
                     lidar2sensor=np.linalg.inv(sensor2lidar).tolist(),
                     sensor2lidar=sensor2lidar.tolist()),
@@ -146,7 +155,7 @@ def _images(ctx: _Context, sample: dict, global2lidar: np.ndarray,
         viewpad = np.eye(4)
         viewpad[:3, :3] = cam2img
         images[cam] = dict(
-            img_path=_rel(path, ctx.root),
+            img_path=rel_path(path, ctx.root),
             # The image size the intrinsics belong to: the loader refuses
             # an image of another size (or rescales cam2img if asked).
             height=int(sd['height']),
@@ -172,19 +181,12 @@ def _label_paths(ctx: _Context, sample: dict, scene: dict,
             rec = None  # e.g. the test split has no labels.
         if rec is not None:
             path = osp.join(ctx.root, rec['filename'])
-            _must_exist(path, 'lidarseg label', token)
-            paths['pts_semantic_mask_path'] = _rel(path, ctx.root)
-    paths['occ_surroundocc_path'] = None
-    if ctx.surroundocc_root is not None:
-        path = osp.join(ctx.surroundocc_root, 'samples',
-                        osp.basename(lidar_sd['filename']) + '.npy')
-        _must_exist(path, 'SurroundOcc label', token)
-        paths['occ_surroundocc_path'] = _rel(path, ctx.root)
-    paths['occ_occ3d_path'] = None
-    if ctx.occ3d_root is not None:
-        path = osp.join(ctx.occ3d_root, scene['name'], token, 'labels.npz')
-        _must_exist(path, 'Occ3D label', token)
-        paths['occ_occ3d_path'] = _rel(path, ctx.root)
+            if exists_or_report(path, 'lidarseg label', token, ctx.report):
+                paths['pts_semantic_mask_path'] = rel_path(path, ctx.root)
+    paths.update(
+        occ_label_paths(ctx.root, ctx.surroundocc_root, ctx.occ3d_root,
+                        lidar_sd['filename'], scene['name'], token,
+                        ctx.report))
     return paths
 
 
@@ -223,30 +225,12 @@ def sample_info(ctx: _Context, sample: dict, scene: dict,
         ego2global=ego2global.tolist(),
         lidar_points=dict(
             num_pts_feats=NUM_POINT_FEATS,
-            lidar_path=_rel(lidar_path, ctx.root),
+            lidar_path=rel_path(lidar_path, ctx.root),
             lidar2ego=lidar2ego.tolist()),
         lidar_sweeps=_sweeps(ctx, lidar_sd, global2lidar, sample['token']),
         images=_images(ctx, sample, global2lidar, cam_names))
     info.update(_label_paths(ctx, sample, scene, lidar_sd))
     return info
-
-
-def _check_lidarseg_files(root_path: str, version: str) -> None:
-    """Name missing lidarseg files before nuscenes-devkit's bare count
-    assertion does."""
-    table = osp.join(root_path, version, 'lidarseg.json')
-    if not osp.isfile(table):
-        return
-    with open(table) as f:
-        records = json.load(f)
-    missing = [
-        osp.join(root_path, rec['filename']) for rec in records
-        if not osp.isfile(osp.join(root_path, rec['filename']))
-    ]
-    if missing:
-        raise FileNotFoundError(
-            f'{len(missing)} lidarseg label files listed in {table} are '
-            f'missing, e.g. {missing[:3]}')
 
 
 def split_scenes(scene_names: Sequence[str],
@@ -298,6 +282,76 @@ def split_scenes(scene_names: Sequence[str],
     }
 
 
+def write_info_file(path: str, entries: List[dict], version: str,
+                    split: str, synthetic: bool, **extra) -> None:
+    """Write one ``dict(metainfo, data_list)`` info file.
+
+    Args:
+        path (str): The pickle to write.
+        entries (list[dict]): Samples (``sample_idx`` is set here).
+        version (str): nuScenes version.
+        split (str): Split name.
+        synthetic (bool): Written from a synthetic world.
+        **extra: Further metainfo.
+    """
+    import mmengine
+    metainfo = dict(
+        dataset='nuscenes-occ',
+        version=version,
+        info_version=INFO_VERSION,
+        classes=OCC_CLASS_NAMES,
+        split=split,
+        scenes=sorted({str(e['scene_name'])
+                       for e in entries}),
+        synthetic=synthetic,
+        cameras=CAMERA_NAMES,
+        **extra)
+    data_list = [dict(e, sample_idx=i) for i, e in enumerate(entries)]
+    mmengine.dump(dict(metainfo=metainfo, data_list=data_list), path)
+
+
+#: The conversion state of worker processes (inherited when they fork).
+_WORKER_CTX: Optional[_Context] = None
+
+
+def _convert_sample(task: Tuple[str, str]) -> Tuple[dict, ConversionReport]:
+    """One sample's info and what it reported (run in a worker)."""
+    ctx = _WORKER_CTX
+    ctx.report = ConversionReport()
+    token, scene_token = task
+    info = sample_info(ctx, ctx.nusc.get('sample', token),
+                       ctx.nusc.get('scene', scene_token))
+    return info, ctx.report
+
+
+def convert_samples(ctx: _Context, tasks: List[Tuple[str, str]],
+                    workers: int) -> List[dict]:
+    """``sample_info`` of every ``(sample token, scene token)``, in order,
+    with a progress bar; ``workers`` > 1 forks that many processes (the
+    devkit tables are shared, not pickled)."""
+    from mmengine.utils import ProgressBar
+    global _WORKER_CTX
+    _WORKER_CTX = ctx
+    report, infos = ctx.report, []
+    bar = ProgressBar(len(tasks), file=sys.stdout)
+    pool = multiprocessing.get_context('fork').Pool(workers) \
+        if workers > 1 and len(tasks) > 1 else None
+    try:
+        results = map(_convert_sample, tasks) if pool is None else \
+            pool.imap(_convert_sample, tasks, chunksize=4)
+        for info, sample_report in results:
+            infos.append(info)
+            report.extend(sample_report)
+            bar.update()
+    finally:
+        ctx.report, _WORKER_CTX = report, None
+        if pool is not None:
+            pool.close()
+            pool.join()
+    print()
+    return infos
+
+
 def create_nuscenes_occ_infos(root_path: str,
                               out_dir: Optional[str] = None,
                               info_prefix: str = 'nuscenes_occ',
@@ -306,7 +360,8 @@ def create_nuscenes_occ_infos(root_path: str,
                               occ3d_root: Optional[str] = None,
                               max_sweeps: int = 10,
                               val_scenes: Optional[Sequence[str]] = None,
-                              overwrite: bool = False) -> Dict[str, str]:
+                              overwrite: bool = False,
+                              workers: int = 0) -> Dict[str, str]:
     """Write the info files of a nuScenes root (real or synthetic).
 
     Args:
@@ -325,15 +380,17 @@ def create_nuscenes_occ_infos(root_path: str,
         max_sweeps (int): Earlier sweeps to link per sample. Defaults to 10.
         val_scenes (Sequence[str], optional): Explicit val scene names.
         overwrite (bool): Replace existing info files. Defaults to False.
+        workers (int): Processes converting samples (0 or 1: this one).
+            Defaults to 0.
 
     Returns:
         dict[str, str]: Split name -> written file.
 
     Raises:
         FileExistsError: An info file exists and ``overwrite`` is False.
-        FileNotFoundError: A linked file is missing (message names it).
+        FileNotFoundError: A key frame or image is missing (the message
+            names it); what can be skipped safely is reported instead.
     """
-    import mmengine
     from nuscenes import NuScenes
     out_dir = out_dir or root_path
     targets = dict()
@@ -344,16 +401,7 @@ def create_nuscenes_occ_infos(root_path: str,
     if existing and not overwrite:
         raise FileExistsError(f'info files already exist: {existing}; pass '
                               '--overwrite to replace them')
-    label_roots = []
-    for given, default, name in (
-            (surroundocc_root, 'nuscenes_occ', 'SurroundOcc'),
-            (occ3d_root, 'gts', 'Occ3D')):
-        folder = given or osp.join(root_path, default)
-        if not osp.isdir(folder):
-            warnings.warn(f'{name} label folder {folder} not found: its '
-                          'paths are recorded as None')
-            folder = None
-        label_roots.append(folder)
+    roots = label_roots(root_path, surroundocc_root, occ3d_root)
     if not osp.isdir(osp.join(root_path, version)):
         found = sorted(d for d in os.listdir(root_path)
                        if d.startswith('v1.0')) if osp.isdir(root_path) \
@@ -361,9 +409,17 @@ def create_nuscenes_occ_infos(root_path: str,
         raise FileNotFoundError(
             f'{osp.join(root_path, version)} not found: {root_path} holds '
             f'the nuScenes versions {found}; pass one with --version.')
-    _check_lidarseg_files(root_path, version)
-    nusc = NuScenes(version=version, dataroot=root_path, verbose=False)
-    ctx = _Context(nusc, root_path, *label_roots, max_sweeps)
+    report = ConversionReport()
+    view_dir = tempfile.mkdtemp(prefix='nuscenes_view_')
+    try:
+        nusc = NuScenes(
+            version=version,
+            dataroot=devkit_view(root_path, version, view_dir, report),
+            verbose=False)
+    finally:
+        shutil.rmtree(view_dir)
+    ctx = _Context(nusc, root_path, *roots, max_sweeps)
+    ctx.report = report
     scenes = {s['name']: s for s in nusc.scene}
     synthetic = is_synthetic_root(root_path)
     splits = split_scenes(list(scenes), version, val_scenes, synthetic)
@@ -377,32 +433,20 @@ def create_nuscenes_occ_infos(root_path: str,
             'scenes with --val-scenes.')
     data = {}
     for split, names in splits.items():
-        entries = []
+        tasks = []
         for name in names:
             token = scenes[name]['first_sample_token']
             while token:
-                sample = nusc.get('sample', token)
-                entries.append(sample_info(ctx, sample, scenes[name]))
-                token = sample['next']
-        data[split] = entries
+                tasks.append((token, scenes[name]['token']))
+                token = nusc.get('sample', token)['next']
+        print(f'{version} {split}: {len(tasks)} samples of {len(names)} '
+              'scenes')
+        data[split] = convert_samples(ctx, tasks, workers)
     if 'val' in data:
         data['val_rainy'] = [e for e in data['val'] if e['is_rainy']]
         data['val_night'] = [e for e in data['val'] if e['is_night']]
     os.makedirs(out_dir, exist_ok=True)
     for split, entries in data.items():
-        data_list = []
-        for idx, entry in enumerate(entries):
-            data_list.append(dict(entry, sample_idx=idx))
-        metainfo = dict(
-            dataset='nuscenes-occ',
-            version=version,
-            info_version=INFO_VERSION,
-            classes=OCC_CLASS_NAMES,
-            split=split,
-            scenes=sorted({e['scene_name']
-                           for e in entries}),
-            synthetic=synthetic,
-            cameras=CAMERA_NAMES)
-        mmengine.dump(
-            dict(metainfo=metainfo, data_list=data_list), targets[split])
+        write_info_file(targets[split], entries, version, split, synthetic)
+    ctx.report.emit(f'{root_path} ({version})')
     return targets

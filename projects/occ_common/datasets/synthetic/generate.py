@@ -28,6 +28,7 @@ import json
 import os
 import os.path as osp
 import shutil
+import sys
 import time
 from collections import deque
 from datetime import datetime, timedelta, timezone
@@ -170,7 +171,8 @@ def generate_synthetic_nuscenes(out_dir: str,
                                 conditions: Optional[Sequence[str]] = None,
                                 camera_mask_rays: Optional[Tuple[int,
                                                                  int]] = None,
-                                write_camera_labels: bool = True) -> dict:
+                                write_camera_labels: bool = True,
+                                progress: bool = False) -> dict:
     """Writes a small, geometrically consistent nuScenes-format world.
 
     Args:
@@ -197,6 +199,8 @@ def generate_synthetic_nuscenes(out_dir: str,
             size, clipped to 64x36 .. 400x225).
         write_camera_labels (bool): Write the per-pixel class maps to
             ``synthetic_gt/cam_labels``. Defaults to True.
+        progress (bool): Show a progress bar of the sweeps on stderr
+            (stdout stays for the summary). Defaults to False.
 
     Returns:
         dict: Summary with ``scene_tokens``, ``scene_names``,
@@ -254,6 +258,10 @@ def generate_synthetic_nuscenes(out_dir: str,
                               meta=osp.join(out_dir, META_PATH),
                               surroundocc=[], occ3d=[], lidarseg=[]))
     scenes_meta = []
+    bar = None
+    if progress:
+        from mmengine.utils import ProgressBar
+        bar = ProgressBar(num_scenes * num_sweeps, file=sys.stderr)
     for index in range(num_scenes):
         is_rainy, is_night = CONDITIONS[conditions[index]]
         world_rng = np.random.default_rng([seed, index, 0])
@@ -293,6 +301,8 @@ def generate_synthetic_nuscenes(out_dir: str,
                                        * SWEEP_PERIOD_S, sample, key,
                                        num_sweeps)
             recent.append(sweep)
+            if bar is not None:
+                bar.update()
             if key:
                 writer.write_key_frame(sample, samples_per_scene,
                                        sweep_index * SWEEP_PERIOD_S,
