@@ -16,6 +16,9 @@ matmuls, convolutions, attention; custom sparse/scatter operators count
 zero) and the share of the machine's fp32 matmul rate that it achieves
 (GFLOP / median wall time / the rate of a ``--matmul-size`` cube
 ``torch.mm`` measured in the same process at the same thread count).
+``--fuse-conv-bn`` (and ``--channels-last``) time the deploy-time model
+whose image backbones' BatchNorms are folded into their convolutions
+(:mod:`projects.occ_common.models.deploy`).
 
 What is timed is ``model.test_step(batch)``: the data preprocessor
 (normalisation, voxelisation), the forward pass and the prediction
@@ -95,6 +98,16 @@ def parse_args(argv=None):
     parser.add_argument(
         '--threads', type=int, help='torch CPU threads (default: torch\'s)')
     parser.add_argument(
+        '--fuse-conv-bn',
+        action='store_true',
+        help='fold the image backbones\' BatchNorms into their convolutions '
+        '(inference only; projects/occ_common/models/deploy.py)')
+    parser.add_argument(
+        '--channels-last',
+        action='store_true',
+        help='with --fuse-conv-bn: also store the backbones\' weights '
+        'channels-last')
+    parser.add_argument(
         '--matmul-size',
         type=int,
         default=2048,
@@ -109,6 +122,8 @@ def parse_args(argv=None):
     args = parser.parse_args(argv)
     if args.compare is not None and len(args.compare) > 2:
         parser.error('--compare takes CONFIG2 and an optional CKPT2.')
+    if args.channels_last and not args.fuse_conv_bn:
+        parser.error('--channels-last goes with --fuse-conv-bn.')
     if args.runs < 1 or args.warmup < 0 or args.batch_size < 1:
         parser.error('expected --runs >= 1, --warmup >= 0, --batch-size '
                      '>= 1.')
@@ -302,6 +317,11 @@ class Subject:
             install_checkpoint_loader()
             load_checkpoint(self.model, checkpoint, map_location='cpu')
         self.model.to(self.device).eval()
+        self.folded_bn = 0
+        if args.fuse_conv_bn:
+            import projects.occ_common.models.deploy as deploy
+            self.folded_bn = deploy.fuse_backbone_conv_bn(
+                self.model, channels_last=args.channels_last)
         if args.synthetic_batch:
             self.batch, self.described = synthetic_batch(
                 cfg, args.batch_size, args.num_points)
@@ -336,6 +356,7 @@ class Subject:
             params=params,
             trainable_params=trainable,
             gflop=gflop,
+            folded_bn=self.folded_bn,
             peak_memory_mb=memory.peak_bytes / 2**20,
             forward_memory_mb=memory.added_bytes / 2**20,
             memory_kind=memory.kind)
@@ -410,6 +431,7 @@ def format_table(report: Dict) -> str:
          f'{r["latency_ms"]["p25"]:.2f}-{r["latency_ms"]["p75"]:.2f}'),
         ('CPU time median (ms)', lambda r: f'{r["cpu_ms"]["median"]:.2f}'),
         ('GFLOP', lambda r: f'{r["gflop"]:.3f}'),
+        ('folded BatchNorms', lambda r: str(r['folded_bn'])),
         ('share of matmul rate', lambda r: '' if r['matmul_share'] is None
          else f'{100 * r["matmul_share"]:.1f} %'),
         ('forward memory (MB)', lambda r: f'{r["forward_memory_mb"]:.1f}'),

@@ -19,11 +19,12 @@ def test_single_model_json(tmp_path, capsys):
     """Toy model: Conv3d(3, 3, 1) has 3 * 3 * 1 * 1 * 1 + 3 = 12 params."""
     out = tmp_path / 'bench.json'
     _tool().main([CONFIG, '--runs', '4', '--warmup', '1', '--device', 'cpu',
-                  '--json', str(out)])
+                  '--fuse-conv-bn', '--json', str(out)])
     report = json.loads(out.read_text())
     assert {'device', 'threads', 'warmup', 'torch', 'models'} <= set(report)
     (model, ) = report['models']
     assert model['params'] == model['trainable_params'] == 12
+    assert model['folded_bn'] == 0  # the toy has no ResNet backbone
     assert model['model'] == 'ToyOccupancyModel' and model['batch_size'] == 1
     latency = model['latency_ms']
     assert len(latency['runs']) == 4
