@@ -5,8 +5,20 @@ Like OccCylindrical's Table IV and SDG-OCC's Time column: the model of
 ``CONFIG`` (weights from ``CKPT`` if given, else as built) predicts one
 batch, at the config's input size, ``--warmup`` times untimed and then
 ``--runs`` times timed; the table gives the median and the spread (std,
-min-max, interquartile range) of the latency. ``--compare CONFIG2`` runs a
-second model in the same process and adds the ratio second / first.
+min-max, interquartile range) of the latency, wall and process CPU time
+(all threads; far less sensitive than wall time to other jobs on a shared
+machine). ``--compare CONFIG2`` builds a second model in the same process,
+times the two in alternating rounds (each round runs both, in rotating
+order, so load drifts hit both alike) and adds the ratio second / first.
+
+Beside latency: the GFLOP of one prediction (``torch.utils.flop_counter``:
+matmuls, convolutions, attention; custom sparse/scatter operators count
+zero) and the share of the machine's fp32 matmul rate that it achieves
+(GFLOP / median wall time / the rate of a ``--matmul-size`` cube
+``torch.mm`` measured in the same process at the same thread count).
+``--fuse-conv-bn`` (and ``--channels-last``) time the deploy-time model
+whose image backbones' BatchNorms are folded into their convolutions
+(:mod:`projects.occ_common.models.deploy`).
 
 What is timed is ``model.test_step(batch)``: the data preprocessor
 (normalisation, voxelisation), the forward pass and the prediction
@@ -22,7 +34,8 @@ Peak memory is measured as every benchmark tool does
 (:class:`projects.occ_common.utils.benchmarking.PeakMemory`): on CUDA
 ``torch.cuda.max_memory_allocated`` during one call, on CPU the process's
 resident-set high-water mark. ``forward_memory_mb`` is the part added by
-the call, ``peak_memory_mb`` the whole process (or all CUDA tensors).
+the call, ``peak_memory_mb`` the whole process (or all CUDA tensors; with
+``--compare`` both models are resident).
 
 Usage::
 
@@ -34,19 +47,20 @@ configs' ``custom_imports``; it imports only the shared benchmark helpers.
 """
 import argparse
 import copy
-import gc
 import json
 import math
 import os
 import os.path as osp
-import time
 from typing import Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 import torch
 from mmengine.config import Config, DictAction
 
-from projects.occ_common.utils.benchmarking import PeakMemory, summarise
+from projects.occ_common.utils.benchmarking import (PeakMemory,
+                                                    alternating_runs,
+                                                    count_gflop, matmul_gflops,
+                                                    matmul_share, summarise)
 
 #: Points of one nuScenes LiDAR sweep (32 beams, 20 Hz), on average.
 NUSCENES_SWEEP_POINTS = 34720
@@ -83,6 +97,22 @@ def parse_args(argv=None):
         f'{NUSCENES_SWEEP_POINTS} points per merged sweep of the config)')
     parser.add_argument(
         '--threads', type=int, help='torch CPU threads (default: torch\'s)')
+    parser.add_argument(
+        '--fuse-conv-bn',
+        action='store_true',
+        help='fold the image backbones\' BatchNorms into their convolutions '
+        '(inference only; projects/occ_common/models/deploy.py)')
+    parser.add_argument(
+        '--channels-last',
+        action='store_true',
+        help='with --fuse-conv-bn: also store the backbones\' weights '
+        'channels-last')
+    parser.add_argument(
+        '--matmul-size',
+        type=int,
+        default=2048,
+        help='side of the fp32 torch.mm whose rate is the reference of the '
+        '"share of matmul rate" (0: skip)')
     parser.add_argument('--json', help='also write the results here')
     parser.add_argument(
         '--cfg-options',
@@ -92,6 +122,8 @@ def parse_args(argv=None):
     args = parser.parse_args(argv)
     if args.compare is not None and len(args.compare) > 2:
         parser.error('--compare takes CONFIG2 and an optional CKPT2.')
+    if args.channels_last and not args.fuse_conv_bn:
+        parser.error('--channels-last goes with --fuse-conv-bn.')
     if args.runs < 1 or args.warmup < 0 or args.batch_size < 1:
         parser.error('expected --runs >= 1, --warmup >= 0, --batch-size '
                      '>= 1.')
@@ -262,56 +294,109 @@ def predict_once(model: torch.nn.Module, data: dict,
         torch.cuda.synchronize(device)
 
 
-def benchmark_model(config: str, checkpoint: Optional[str], args) -> Dict:
-    """Build, load and time one model; see the module docstring."""
-    from mmengine.registry import MODELS
-    from mmengine.runner import load_checkpoint
-    cfg = load_config(config, args.cfg_options)
-    device = torch.device(args.device)
-    model = MODELS.build(cfg.model)
-    if checkpoint:
-        # The config's plugin provides the restricted loader; nothing is
-        # installed on import.
-        from projects.occ_common.utils import install_checkpoint_loader
-        install_checkpoint_loader()
-        load_checkpoint(model, checkpoint, map_location='cpu')
-    model.to(device).eval()
-    if args.synthetic_batch:
-        batch, described = synthetic_batch(cfg, args.batch_size,
-                                           args.num_points)
-    else:
-        batch, described = test_batch(cfg, args.batch_size)
+class Subject:
+    """One model under test: built, loaded, with its batch.
 
-    times = []
-    for i in range(args.warmup + args.runs):
-        # A fresh copy each time: test_step writes predictions into it.
-        data = copy.deepcopy(batch)
-        start = time.perf_counter()
-        predict_once(model, data, device)
-        if i >= args.warmup:
-            times.append((time.perf_counter() - start) * 1000)
-    data = copy.deepcopy(batch)
-    with PeakMemory(device) as memory:
-        predict_once(model, data, device)
-    params = sum(p.numel() for p in model.parameters())
-    trainable = sum(p.numel() for p in model.parameters() if p.requires_grad)
-    result = dict(
-        config=config,
-        checkpoint=checkpoint,
-        model=type(model).__name__,
-        input=described,
-        batch_size=args.batch_size,
-        params=params,
-        trainable_params=trainable,
-        latency_ms=summarise(times),
-        peak_memory_mb=memory.peak_bytes / 2**20,
-        forward_memory_mb=memory.added_bytes / 2**20,
-        memory_kind=memory.kind)
-    return result
+    Args:
+        config (str): Config file.
+        checkpoint (str, optional): Weights to load.
+        args (argparse.Namespace): The command line.
+    """
+
+    def __init__(self, config: str, checkpoint: Optional[str], args) -> None:
+        from mmengine.registry import MODELS
+        from mmengine.runner import load_checkpoint
+        cfg = load_config(config, args.cfg_options)
+        self.config, self.checkpoint = config, checkpoint
+        self.device = torch.device(args.device)
+        self.model = MODELS.build(cfg.model)
+        if checkpoint:
+            # The config's plugin provides the restricted loader; nothing
+            # is installed on import.
+            from projects.occ_common.utils import install_checkpoint_loader
+            install_checkpoint_loader()
+            load_checkpoint(self.model, checkpoint, map_location='cpu')
+        self.model.to(self.device).eval()
+        self.folded_bn = 0
+        if args.fuse_conv_bn:
+            import projects.occ_common.models.deploy as deploy
+            self.folded_bn = deploy.fuse_backbone_conv_bn(
+                self.model, channels_last=args.channels_last)
+        if args.synthetic_batch:
+            self.batch, self.described = synthetic_batch(
+                cfg, args.batch_size, args.num_points)
+        else:
+            self.batch, self.described = test_batch(cfg, args.batch_size)
+        self._data = None
+
+    def fresh_input(self) -> None:
+        """A fresh copy of the batch: ``test_step`` writes into it."""
+        self._data = copy.deepcopy(self.batch)
+
+    def predict(self) -> None:
+        """One prediction on the input :meth:`fresh_input` made."""
+        predict_once(self.model, self._data, self.device)
+
+    def static_report(self) -> Dict:
+        """Parameters, GFLOP and peak memory of one prediction."""
+        self.fresh_input()
+        gflop = count_gflop(self.predict)
+        self.fresh_input()
+        with PeakMemory(self.device) as memory:
+            self.predict()
+        params = sum(p.numel() for p in self.model.parameters())
+        trainable = sum(p.numel() for p in self.model.parameters()
+                        if p.requires_grad)
+        return dict(
+            config=self.config,
+            checkpoint=self.checkpoint,
+            model=type(self.model).__name__,
+            input=self.described,
+            batch_size=self.batch_size,
+            params=params,
+            trainable_params=trainable,
+            gflop=gflop,
+            folded_bn=self.folded_bn,
+            peak_memory_mb=memory.peak_bytes / 2**20,
+            forward_memory_mb=memory.added_bytes / 2**20,
+            memory_kind=memory.kind)
+
+    @property
+    def batch_size(self) -> int:
+        return len(self.batch['data_samples'])
+
+
+def benchmark_models(subjects: List[Subject], args,
+                     rate: Optional[float]) -> List[Dict]:
+    """Static figures of each model, then latency in alternating rounds.
+
+    Args:
+        subjects (list[Subject]): One or two models.
+        args (argparse.Namespace): ``runs``, ``warmup``, ``device``.
+        rate (float, optional): The matmul rate (GFLOP/s) for the share.
+
+    Returns:
+        list[dict]: One result per model.
+    """
+    results = [subject.static_report() for subject in subjects]
+    names = [str(i) for i in range(len(subjects))]
+    times = alternating_runs(
+        {n: s.predict for n, s in zip(names, subjects)},
+        rounds=args.runs, warmup=args.warmup, device=args.device,
+        before={n: s.fresh_input for n, s in zip(names, subjects)})
+    for name, result in zip(names, results):
+        wall = [t * 1000 for t in times[name]['wall_s']]
+        result['latency_ms'] = summarise(wall)
+        result['cpu_ms'] = summarise([t * 1000
+                                      for t in times[name]['cpu_s']])
+        result['matmul_share'] = (None if rate is None else matmul_share(
+            result['gflop'], result['latency_ms']['median'] / 1000, rate))
+    return results
 
 
 def ratios(first: Dict, second: Dict) -> Dict[str, Optional[float]]:
-    """second / first of params, median latency and forward memory.
+    """second / first of params, GFLOP, median latency (wall and CPU) and
+    forward memory.
 
     A ratio whose denominator is 0 (or a forward memory under 1 MB) is
     None.
@@ -324,6 +409,9 @@ def ratios(first: Dict, second: Dict) -> Dict[str, Optional[float]]:
         params=ratio(first['params'], second['params']),
         latency_median=ratio(first['latency_ms']['median'],
                              second['latency_ms']['median']),
+        cpu_median=ratio(first['cpu_ms']['median'],
+                         second['cpu_ms']['median']),
+        gflop=ratio(first['gflop'], second['gflop']),
         # Below 1 MB the RSS measure is page-level noise.
         forward_memory=ratio(first['forward_memory_mb'],
                              second['forward_memory_mb'], least=1.0))
@@ -341,12 +429,18 @@ def format_table(report: Dict) -> str:
          f'{r["latency_ms"]["min"]:.2f}-{r["latency_ms"]["max"]:.2f}'),
         ('latency IQR (ms)', lambda r:
          f'{r["latency_ms"]["p25"]:.2f}-{r["latency_ms"]["p75"]:.2f}'),
+        ('CPU time median (ms)', lambda r: f'{r["cpu_ms"]["median"]:.2f}'),
+        ('GFLOP', lambda r: f'{r["gflop"]:.3f}'),
+        ('folded BatchNorms', lambda r: str(r['folded_bn'])),
+        ('share of matmul rate', lambda r: '' if r['matmul_share'] is None
+         else f'{100 * r["matmul_share"]:.1f} %'),
         ('forward memory (MB)', lambda r: f'{r["forward_memory_mb"]:.1f}'),
         ('peak memory (MB)', lambda r: f'{r["peak_memory_mb"]:.1f}'),
     ]
     names = [osp.splitext(osp.basename(r['config']))[0] for r in models]
     ratio_of = {'params': 'params', 'latency median (ms)':
-                'latency_median', 'forward memory (MB)': 'forward_memory'}
+                'latency_median', 'CPU time median (ms)': 'cpu_median',
+                'GFLOP': 'gflop', 'forward memory (MB)': 'forward_memory'}
     header = ['', *names] + (['ratio 2/1'] if 'ratio' in report else [])
     lines = [header]
     for label, cell in rows:
@@ -366,7 +460,12 @@ def format_table(report: Dict) -> str:
         text.append(f'{osp.basename(r["config"])}: {r["input"]}, batch '
                     f'{r["batch_size"]}, {report["device"]}, '
                     f'{report["threads"]} threads, {runs} runs after '
-                    f'{report["warmup"]} warm-up')
+                    f'{report["warmup"]} warm-up' +
+                    (', alternating rounds' if len(models) > 1 else ''))
+    if report.get('matmul_gflops'):
+        text.append(f'matmul rate (fp32 {report["matmul_size"]}^3 torch.mm, '
+                    f'same process and threads): '
+                    f'{report["matmul_gflops"]:.1f} GFLOP/s')
     return '\n'.join(text)
 
 
@@ -375,22 +474,22 @@ def main(argv=None) -> Dict:
     args = parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)
+    subjects = [Subject(args.config, args.checkpoint, args)]
+    if args.compare:
+        subjects.append(
+            Subject(args.compare[0], (args.compare[1:] or [None])[0], args))
+    rate = (matmul_gflops(args.matmul_size, device=args.device)
+            if args.matmul_size else None)
     report = dict(
         device=args.device,
         threads=torch.get_num_threads(),
         warmup=args.warmup,
         torch=torch.__version__,
-        models=[benchmark_model(args.config, args.checkpoint, args)])
+        matmul_size=args.matmul_size,
+        matmul_gflops=rate,
+        models=benchmark_models(subjects, args, rate))
     if args.compare:
-        # The first model is gone (benchmark_model returned): free its
-        # memory so that it does not count towards the second's peak.
-        gc.collect()
-        if torch.cuda.is_available():
-            torch.cuda.empty_cache()
-        second = benchmark_model(args.compare[0], (args.compare[1:] or
-                                                   [None])[0], args)
-        report['models'].append(second)
-        report['ratio'] = ratios(report['models'][0], second)
+        report['ratio'] = ratios(*report['models'])
     print(format_table(report))
     if args.json:
         folder = osp.dirname(osp.abspath(args.json))

@@ -19,11 +19,12 @@ def test_single_model_json(tmp_path, capsys):
     """Toy model: Conv3d(3, 3, 1) has 3 * 3 * 1 * 1 * 1 + 3 = 12 params."""
     out = tmp_path / 'bench.json'
     _tool().main([CONFIG, '--runs', '4', '--warmup', '1', '--device', 'cpu',
-                  '--json', str(out)])
+                  '--fuse-conv-bn', '--json', str(out)])
     report = json.loads(out.read_text())
     assert {'device', 'threads', 'warmup', 'torch', 'models'} <= set(report)
     (model, ) = report['models']
     assert model['params'] == model['trainable_params'] == 12
+    assert model['folded_bn'] == 0  # the toy has no ResNet backbone
     assert model['model'] == 'ToyOccupancyModel' and model['batch_size'] == 1
     latency = model['latency_ms']
     assert len(latency['runs']) == 4
@@ -32,12 +33,20 @@ def test_single_model_json(tmp_path, capsys):
     assert latency['median'] == pytest.approx(np.median(latency['runs']))
     assert model['peak_memory_mb'] > 0 and model['forward_memory_mb'] >= 0
     assert model['memory_kind'] == 'cpu_rss_high_water'
+    # Conv3d(3, 3, 1) on the toy's 8 x 8 x 4 grid: 256 voxels x 3 x 3
+    # multiply-adds x 2 = 4,608 FLOP. The share is that work over the
+    # median wall time and the matmul rate measured in the same run.
+    assert model['gflop'] * 1e9 == pytest.approx(4608)
+    assert len(model['cpu_ms']['runs']) == 4
+    assert model['matmul_share'] == pytest.approx(
+        model['gflop'] / (latency['median'] / 1000) / report['matmul_gflops'])
     table = capsys.readouterr().out
     assert 'latency median (ms)' in table and 'ratio' not in table
 
 
 def test_compare_identical_models(tmp_path, capsys):
-    """--compare toy toy: params ratio exactly 1, a positive latency ratio.
+    """--compare toy toy: params and GFLOP ratios exactly 1, the latency
+    ratio the quotient of the two medians.
 
     Timings are not asserted: on a shared machine the ratio of two
     millisecond forwards has been measured at 153 under load. That the
@@ -49,6 +58,7 @@ def test_compare_identical_models(tmp_path, capsys):
     assert len(report['models']) == 2
     assert report['models'][1]['batch_size'] == 2
     assert report['ratio']['params'] == 1.0
+    assert report['ratio']['gflop'] == 1.0
     medians = [m['latency_ms']['median'] for m in report['models']]
     assert report['ratio']['latency_median'] == pytest.approx(
         medians[1] / medians[0])
@@ -59,11 +69,12 @@ def test_ratios_and_synthetic_batch_errors():
     """A zero denominator gives None; a config without shapes is named."""
     tool = _tool()
     first = dict(params=0, latency_ms=dict(median=2.0),
-                 forward_memory_mb=0.5)
+                 cpu_ms=dict(median=4.0), gflop=0.5, forward_memory_mb=0.5)
     second = dict(params=5, latency_ms=dict(median=3.0),
-                  forward_memory_mb=4.0)
+                  cpu_ms=dict(median=5.0), gflop=1.0, forward_memory_mb=4.0)
     assert tool.ratios(first, second) == dict(
-        params=None, latency_median=1.5, forward_memory=None)
+        params=None, latency_median=1.5, cpu_median=1.25, gflop=2.0,
+        forward_memory=None)
     cfg = tool.load_config(CONFIG, None)
     with pytest.raises(ValueError, match='declares neither'):
         tool.synthetic_batch(cfg, 1, None)

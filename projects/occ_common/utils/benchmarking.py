@@ -165,3 +165,110 @@ def summarise(times: List[float]) -> Dict[str, float]:
         p25=quartiles[0],
         p75=quartiles[1],
         runs=list(times))
+
+
+def alternating_runs(
+        calls: Dict[str, Callable[[], object]],
+        rounds: int,
+        warmup: int = 0,
+        device='cpu',
+        before: Optional[Dict[str, Callable[[], object]]] = None
+) -> Dict[str, Dict[str, List[float]]]:
+    """Time several calls in alternating rounds, for A/B comparisons.
+
+    On a shared machine the load drifts over seconds; timing model A's runs
+    and then model B's puts that drift into their ratio. Here every round
+    times each call once, and the order rotates from round to round
+    (round ``r`` starts with call ``r mod n``) so that no call always runs
+    right after another's allocations.
+
+    Args:
+        calls (dict[str, Callable[[], object]]): Name -> call to time.
+        rounds (int): Timed rounds.
+        warmup (int): Untimed rounds first. Defaults to 0.
+        device (torch.device | str): CUDA devices are synchronised
+            before each clock stops. Defaults to 'cpu'.
+        before (dict[str, Callable[[], object]], optional): Name -> an
+            untimed call made right before each of that name's calls (e.g.
+            a fresh copy of an input the call consumes).
+
+    Returns:
+        dict: Name -> ``{'wall_s': [...], 'cpu_s': [...]}``, one entry per
+        round, as :func:`timed_runs` gives them.
+    """
+    before = before or {}
+    names = list(calls)
+    times = {name: dict(wall_s=[], cpu_s=[]) for name in names}
+    for r in range(warmup + rounds):
+        start = r % len(names)
+        for name in names[start:] + names[:start]:
+            if name in before:
+                before[name]()
+            one = timed_runs(calls[name], 1, device=device)
+            if r >= warmup:
+                times[name]['wall_s'] += one['wall_s']
+                times[name]['cpu_s'] += one['cpu_s']
+    return times
+
+
+def count_gflop(run: Callable[[], object]) -> float:
+    """GFLOP of one call, by ``torch.utils.flop_counter``.
+
+    Counts the aten operators the counter knows (matmuls, convolutions,
+    attention: 2 FLOP per multiply-add); element-wise work and custom
+    operators (spconv's sparse convolutions, mmcv's scatter) count zero, so
+    this is the model's dense-algebra work, the part the matmul rate of
+    :func:`matmul_gflops` is the ceiling for.
+
+    Args:
+        run (Callable[[], object]): The call (run once, under no_grad if
+            it should be).
+
+    Returns:
+        float: Billions of floating-point operations.
+    """
+    from torch.utils.flop_counter import FlopCounterMode
+    counter = FlopCounterMode(display=False)
+    with counter:
+        run()
+    return counter.get_total_flops() / 1e9
+
+
+def matmul_gflops(size: int = 2048, repeats: int = 3, device='cpu') -> float:
+    """The machine's fp32 matmul rate: best of ``repeats`` ``torch.mm``.
+
+    The reference a model's achieved rate is a share of; measure it in the
+    same process, at the same thread count, as the model.
+
+    Args:
+        size (int): Side of the square matrices (2 size^3 FLOP per
+            product). Defaults to 2048.
+        repeats (int): Timed products; the fastest counts. Defaults to 3.
+        device (torch.device | str): Defaults to 'cpu'.
+
+    Returns:
+        float: GFLOP per second.
+    """
+    gen = torch.Generator().manual_seed(0)
+    a = torch.randn(size, size, generator=gen).to(device)
+    b = torch.randn(size, size, generator=gen).to(device)
+    times = timed_runs(lambda: torch.mm(a, b), repeats, warmup=1,
+                       device=device)['wall_s']
+    return 2.0 * size**3 / min(times) / 1e9
+
+
+def matmul_share(gflop: float, seconds: float, rate_gflops: float) -> float:
+    """The share of the matmul rate a run achieved: (GFLOP / s) / rate.
+
+    Args:
+        gflop (float): Work of the run (:func:`count_gflop`).
+        seconds (float): Its wall time.
+        rate_gflops (float): :func:`matmul_gflops`.
+
+    Returns:
+        float: E.g. 0.4 for 60 GFLOP in 1 s against 150 GFLOP/s.
+    """
+    if seconds <= 0 or rate_gflops <= 0:
+        raise ValueError(f'expected positive time and rate, got {seconds} s '
+                         f'and {rate_gflops} GFLOP/s.')
+    return gflop / seconds / rate_gflops

@@ -2,7 +2,10 @@
 import pytest
 import torch
 
-from projects.occ_common.utils.benchmarking import (PeakMemory, summarise,
+from projects.occ_common.utils.benchmarking import (PeakMemory,
+                                                    alternating_runs,
+                                                    count_gflop, matmul_gflops,
+                                                    matmul_share, summarise,
                                                     timed_runs)
 
 
@@ -35,3 +38,37 @@ def test_timed_runs_and_summary():
         (2.5, 4.0, 1.0, 10.0)
     assert (stats['p25'], stats['p75']) == pytest.approx((1.75, 4.75))
     assert summarise([5.0])['std'] == 0.0
+
+
+def test_alternating_runs_rotate_the_order():
+    """Two calls, 1 warm-up and 3 timed rounds: rounds start with a, b, a,
+    b (round r starts with call r mod 2), so the call log is
+    a b | b a | a b | b a and each name gets 3 timings, not 4."""
+    log = []
+    times = alternating_runs(
+        dict(a=lambda: log.append('a'), b=lambda: log.append('b')),
+        rounds=3, warmup=1)
+    assert ''.join(log) == 'abbaabba'
+    assert set(times) == {'a', 'b'}
+    assert all(len(t['wall_s']) == len(t['cpu_s']) == 3
+               for t in times.values())
+
+
+def test_count_gflop_of_a_linear_layer():
+    """Linear(4, 3) on a batch of 2: one (2 x 4) @ (4 x 3) product,
+    2 * 2 * 4 * 3 = 48 FLOP (the bias add is element-wise: not counted);
+    a ReLU alone counts 0."""
+    layer = torch.nn.Linear(4, 3)
+    x = torch.ones(2, 4)
+    with torch.no_grad():
+        assert count_gflop(lambda: layer(x)) * 1e9 == pytest.approx(48)
+        assert count_gflop(lambda: torch.relu(x)) == 0.0
+
+
+def test_matmul_rate_and_share():
+    """The measured rate is positive; 60 GFLOP in 1 s against 150 GFLOP/s
+    is a share of 0.4; a zero time is refused by value."""
+    assert matmul_gflops(size=64, repeats=2) > 0
+    assert matmul_share(60.0, 1.0, 150.0) == pytest.approx(0.4)
+    with pytest.raises(ValueError, match='positive time'):
+        matmul_share(1.0, 0.0, 150.0)
