@@ -18,7 +18,9 @@ OCC_FIELDS = dict(
     gt_seg_2d=torch.uint8)
 
 #: Meta keys packed by default: identity, weather, geometry of every view
-#: and of the working frame.
+#: and of the working frame, and which points column is the sweeps' time
+#: lag (``points_time_dim``: models that need the key frame alone, such as
+#: SDG-OCC's depth guidance, select it as ``PointsToDepthMaps`` does).
 OCC_META_KEYS = ('sample_idx', 'token', 'scene_token', 'scene_name',
                  'is_rainy', 'is_night', 'timestamp', 'lidar_path',
                  'img_path', 'cam_names', 'num_views', 'ori_shape',
@@ -26,7 +28,8 @@ OCC_META_KEYS = ('sample_idx', 'token', 'scene_token', 'scene_name',
                  'lidar2cam', 'cam2ego', 'img_aug_matrix', 'bda_matrix',
                  'lidar2ego', 'ori_lidar2ego', 'ego2global', 'occ_format',
                  'coord_frame', 'occ_pc_range', 'occ_voxel_size',
-                 'num_pts_feats', 'img_aug_params', 'bda_params')
+                 'num_pts_feats', 'img_aug_params', 'bda_params',
+                 'points_time_dim')
 
 
 @TRANSFORMS.register_module()
