@@ -244,3 +244,19 @@ def test_loss_mask_key_ignores_voxels_outside_the_camera_mask():
     torch.manual_seed(0)
     unmasked = MODELS.build(cfg).train()(inputs, samples, mode='loss')
     assert unmasked['loss_focal'].item() > 0.0
+
+
+def test_seg_targets_ignore_cells_without_a_labelled_return():
+    """By default a feature cell that no labelled return hits is ignored
+    (255), not class 0: the labels of _batch are 1 (depth <= 4 m) or 2
+    where a point projects, so every target is 1, 2 or 255, and the cells
+    without a point are 255."""
+    model = _model('fusion')
+    inputs, samples = _batch()
+    gt_depth = model.gt_depth(samples, torch.device('cpu'))
+    target = model.seg_targets(samples, gt_depth)
+    assert target.shape == (4, 2, 4)
+    assert set(target.unique().tolist()) <= {1, 2, 255}
+    no_return = gt_depth.view(4, 2, 16, 4, 16).amax((2, 4)) == 0
+    assert no_return.any()
+    assert (target[no_return] == 255).all()

@@ -9,8 +9,9 @@
 _base_ = ['../../_base_/schedules/adamw-24e.py']
 
 _img_stride = 16  # image features at 1/16 (paper)
-# 2D semantic classes: 0 background (cells no labelled return hits), then
-# the 16 lidarseg classes as projected by PointsToSemanticMaps.
+# 2D semantic classes: the 16 lidarseg classes 1..16 as projected by
+# PointsToSemanticMaps; 0 is eq. 2's "no class" (never a target: cells no
+# labelled return hits are ignored).
 _num_seg_classes = 17
 _point_dims = 5  # x, y, z, intensity, time lag of the merged sweeps
 # Channel widths (not fixed by the paper): BEVDet-Occ / FlashOcc's 64-channel
@@ -115,8 +116,7 @@ model = dict(
         type='mmdet.CrossEntropyLoss',
         ignore_index=255,
         avg_non_ignore=True,
-        loss_weight=0.5),  # not fixed by the paper; BEVDet-style aux weight
-    seg_empty_label=0)
+        loss_weight=0.5))  # not fixed by the paper; BEVDet-style aux weight
 
 # SDG-KL: SDG-Fusion's network trained with the fusion as a teacher and FOAD
 # distillation into the camera BEV; inference skips the SPVCNN branch and
