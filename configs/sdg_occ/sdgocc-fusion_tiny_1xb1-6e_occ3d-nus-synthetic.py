@@ -41,12 +41,7 @@ model = dict(
         stage_channels=(_lidar_channels, _lidar_channels),
         stage_strides=(1, 1),
         out_channels=_lidar_channels),
-    fusion=dict(
-        source_channels=_lidar_channels,
-        cross_channels=_cam_channels,
-        out_channels=_cam_channels,
-        embed_dims=16,
-        num_heads=2),
+    fusion=dict(embed_dims=16, num_heads=2),
     bev_encoder=dict(
         in_channels=_cam_channels,
         stage_channels=[_cam_channels * 2, _cam_channels * 4],

@@ -10,13 +10,16 @@ from .bev_pool import (BEVPoolIndexCache, BEVPoolIndices, bev_pool,
 from .c2h_head import (ChannelToHeightHead, channels_to_height,
                        height_logits_to_xyz)
 from .foad import FOADDistillLoss, foad_weights
-from .neighborhood_fusion import NeighborhoodFusion, neighborhood_attention
+from .neighborhood_fusion import (NeighborhoodFusion, neighborhood_attention,
+                                  window_starts)
 from .sdg_occ import SDGOcc
-from .sdg_view_transform import SDGViewTransform, points_to_depth_maps
+from .sdg_view_transform import (SDGViewTransform, key_frame_points,
+                                 points_to_depth_maps)
 from .seg_targets import downsample_seg_labels
 from .semantic_diffusion import semantic_depth_diffusion
 from .virtual_points import (bilinear_incremental_discretization,
-                             interpolate_depth_prob, virtual_point_depths)
+                             interpolate_depth_prob, virtual_point_depths,
+                             virtual_point_offsets)
 
 __all__ = [
     'BEVPoolIndexCache', 'BEVPoolIndices', 'ChannelToHeightHead',
@@ -24,7 +27,7 @@ __all__ = [
     'SDGViewTransform', 'bev_pool', 'bev_pool_indices', 'bev_pool_mask',
     'bilinear_incremental_discretization', 'channels_to_height',
     'downsample_seg_labels', 'foad_weights', 'height_logits_to_xyz',
-    'interpolate_depth_prob', 'neighborhood_attention',
+    'interpolate_depth_prob', 'key_frame_points', 'neighborhood_attention',
     'points_to_depth_maps', 'semantic_depth_diffusion',
-    'virtual_point_depths'
+    'virtual_point_depths', 'virtual_point_offsets', 'window_starts'
 ]

@@ -1,6 +1,6 @@
 """BEV encoder of SDG-OCC: residual stages and a top-down FPN.
 
-SDG-OCC follows BEVDet/FlashOcc here (Duan et al., CVPR 2025, Sec. 3.5):
+SDG-OCC follows BEVDet/FlashOcc here (Duan et al., CVPR 2025, Sec. 3.6):
 a BEV map goes through residual stages at strides 2, 4 and 8, and an FPN
 merges them back to the input resolution (200 x 200 on Occ3D) before the
 channel-to-height head.

@@ -1,6 +1,6 @@
 """Fusion-to-occupancy-driven active distillation (FOAD).
 
-Implements eqs. 5-8 of SDG-OCC (Duan et al., CVPR 2025, Sec. 3.4). A
+Implements eqs. 5-8 of SDG-OCC (Duan et al., CVPR 2025, Sec. 3.5). A
 LiDAR-dominant fusion BEV is the teacher and the camera BEV the student.
 Cells are split into the active region AR = fused & img (both the teacher
 and the camera saw the cell) and the inactive region IR = fused & ~img

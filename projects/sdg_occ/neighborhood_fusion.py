@@ -1,40 +1,84 @@
 """Neighbourhood cross-attention fusion of two BEV maps.
 
-Implements eqs. 3-4 of SDG-OCC (Duan et al., CVPR 2025, Sec. 3.3): the
+Implements eqs. 3-4 of SDG-OCC (Duan et al., CVPR 2025, Sec. 3.5): the
 source BEV gives the queries, the cross BEV gives keys and values over a
 k x k neighbourhood of every cell (neighbourhood attention with a learned
 relative positional bias, eq. 3), and the fused map is re-weighted by a
-channel gate ``sigmoid(Conv(AvgPool(F))) * F`` (eq. 4).
+channel gate ``sigmoid(Conv(AvgPool(F))) * F`` (eq. 4). Which BEV is the
+source is the detector's choice: the camera BEV for SDG-Fusion, the LiDAR
+BEV for SDG-KL's teacher.
 """
 import math
 from typing import Optional
 
 import torch
-import torch.nn.functional as F
 from mmdet3d.registry import MODELS
 from mmengine.model import BaseModule
 from torch import Tensor, nn
 
+#: How a window meets the map border: ``'shift'`` moves it inside the map
+#: (NAT, Hassani et al., CVPR 2023, ref. [3] of SDG-OCC: every query sees
+#: k * k keys); ``'mask'`` keeps it centred and drops the cells outside.
+BORDERS = ('shift', 'mask')
 
-def neighborhood_attention(query: Tensor, key: Tensor, value: Tensor,
-                           rel_bias: Tensor, kernel_size: int) -> Tensor:
-    """Multi-head attention of each cell over its k x k neighbourhood.
 
-    ``out[i] = sum_j softmax_j(q_i . k_j / sqrt(d) + bias[j - i]) v_j`` for
-    the cells j of the window centred on i. Windows are centred and cells
-    outside the map are masked out (not clamped as in NATTEN), so window
-    slot s always holds the same relative offset and the bias is a table of
-    k * k values per head. The loop runs over the k * k offsets, each a
-    whole-map tensor operation, so memory stays O(B * C * H * W) instead
-    of the O(k^2 B C H W) of an unfolded key tensor.
+def window_starts(size: int, kernel_size: int, border: str,
+                  device=None) -> Tensor:
+    """First row (or column) of the window of every query position.
+
+    ``'shift'``: ``clamp(i - k // 2, 0, size - k)``, NATTEN's window start
+    for dilation 1, so the window stays inside the map; on a map smaller
+    than the window it starts at 0 and the cells past the end are masked.
+    ``'mask'``: ``i - k // 2``, the centred window.
+
+    Args:
+        size (int): Length of the axis.
+        kernel_size (int): Odd window size k.
+        border (str): One of :data:`BORDERS`.
+        device (torch.device, optional): Device of the result.
+
+    Returns:
+        Tensor: Long starts. Shape (size,).
+    """
+    if border not in BORDERS:
+        raise ValueError(f'border must be one of {BORDERS}, got {border!r}')
+    pos = torch.arange(size, device=device)
+    start = pos - kernel_size // 2
+    if border == 'shift':
+        start = start.clamp(min=0).clamp(max=max(size - kernel_size, 0))
+    return start
+
+
+def neighborhood_attention(query: Tensor,
+                           key: Tensor,
+                           value: Tensor,
+                           rel_bias: Tensor,
+                           kernel_size: int,
+                           border: str = 'shift') -> Tensor:
+    """Multi-head attention of each cell over a k x k window (eq. 3).
+
+    ``out[i] = sum_j softmax_j(q_i . k_j / sqrt(d) + B[j - i]) v_j`` over
+    the cells j of the window of i (see :func:`window_starts`). The
+    relative positional bias is NAT's table of (2k - 1) x (2k - 1) entries
+    per head, indexed by the offset ``j - i + k - 1`` per axis: a shifted
+    window at the border reaches offsets up to k - 1, a centred one only up
+    to k // 2.
+
+    The cells whose centred window lies inside the map (all but a border
+    of k // 2 cells) are computed with whole-block slices of the keys and
+    values, one per window slot, as views; the border strips, where the
+    two rules differ, gather their windows' keys explicitly. Memory stays
+    O(k^2 B heads H W) for the logits; no unfolded (k^2 B C H W) key
+    tensor is ever built.
 
     Args:
         query (Tensor): Shape (B, heads, d, H, W).
         key (Tensor): Shape (B, heads, d, H, W).
         value (Tensor): Shape (B, heads, d_v, H, W).
-        rel_bias (Tensor): Bias per head and window slot (row-major over the
-            k x k offsets). Shape (heads, k * k).
+        rel_bias (Tensor): Bias per head and offset (row, column).
+            Shape (heads, 2k - 1, 2k - 1).
         kernel_size (int): Odd window size k.
+        border (str): One of :data:`BORDERS`. Defaults to 'shift'.
 
     Returns:
         Tensor: Attended values. Shape (B, heads, d_v, H, W).
@@ -42,6 +86,8 @@ def neighborhood_attention(query: Tensor, key: Tensor, value: Tensor,
     if kernel_size < 1 or kernel_size % 2 == 0:
         raise ValueError(f'kernel_size must be odd and >= 1, got '
                          f'{kernel_size}')
+    if border not in BORDERS:
+        raise ValueError(f'border must be one of {BORDERS}, got {border!r}')
     if query.dim() != 5 or key.shape != query.shape:
         raise ValueError('query and key must both have shape (B, heads, d, '
                          f'H, W), got {tuple(query.shape)} and '
@@ -52,44 +98,138 @@ def neighborhood_attention(query: Tensor, key: Tensor, value: Tensor,
                          f'matching query {tuple(query.shape)}, got '
                          f'{tuple(value.shape)}')
     num_heads = query.shape[1]
-    if rel_bias.shape != (num_heads, kernel_size * kernel_size):
-        raise ValueError(f'rel_bias must have shape ({num_heads}, '
-                         f'{kernel_size * kernel_size}), got '
-                         f'{tuple(rel_bias.shape)}')
+    span = 2 * kernel_size - 1
+    if rel_bias.shape != (num_heads, span, span):
+        raise ValueError(f'rel_bias must have shape ({num_heads}, {span}, '
+                         f'{span}), got {tuple(rel_bias.shape)}')
     height, width = query.shape[-2:]
     reach = kernel_size // 2
-    pad = (reach, reach, reach, reach)
-    key_pad = F.pad(key, pad)
-    value_pad = F.pad(value, pad)
-    inside = F.pad(
-        query.new_ones(height, width, dtype=torch.bool), pad, value=False)
+    device = query.device
+
+    def strip(rows: range, cols: range) -> Tensor:
+        return _attend_gathered(query, key, value, rel_bias, kernel_size,
+                                border, torch.arange(rows.start, rows.stop,
+                                                     device=device),
+                                torch.arange(cols.start, cols.stop,
+                                             device=device))
+
+    if height < kernel_size or width < kernel_size:
+        return strip(range(height), range(width))
+    inner = _attend_inner(query, key, value, rel_bias, kernel_size)
+    if reach == 0:
+        return inner
+    middle = torch.cat([
+        strip(range(reach, height - reach), range(reach)), inner,
+        strip(range(reach, height - reach), range(width - reach, width))
+    ], dim=4)
+    return torch.cat([
+        strip(range(reach), range(width)), middle,
+        strip(range(height - reach, height), range(width))
+    ], dim=3)
+
+
+def _attend_inner(query: Tensor, key: Tensor, value: Tensor,
+                  rel_bias: Tensor, kernel_size: int) -> Tensor:
+    """Attention of the cells whose centred window lies inside the map.
+
+    Query (i, j), i in [r, H - r), j in [r, W - r), slot (a, c) sees key
+    (i - r + a, j - r + c): for all of them at once, the block
+    ``key[..., a:a + H - 2r, c:c + W - 2r]`` (a view), with the bias at
+    offset (a - r, c - r), table index (a + r, c + r).
+
+    Returns:
+        Tensor: Shape (B, heads, d_v, H - 2r, W - 2r).
+    """
+    height, width = query.shape[-2:]
+    reach = kernel_size // 2
+    out_h, out_w = height - 2 * reach, width - 2 * reach
+    queries = query[..., reach:reach + out_h, reach:reach + out_w]
     scale = 1.0 / math.sqrt(query.shape[2])
-
-    logits = []
-    for slot in range(kernel_size * kernel_size):
-        row, col = divmod(slot, kernel_size)
-        window = (slice(row, row + height), slice(col, col + width))
-        logit = (query * key_pad[..., window[0], window[1]]).sum(2) * scale
-        logit = logit + rel_bias[:, slot].view(1, num_heads, 1, 1)
-        logits.append(
-            logit.masked_fill(~inside[window], float('-inf')))
+    slots = [divmod(s, kernel_size) for s in range(kernel_size**2)]
+    logits = [(queries * key[..., a:a + out_h, c:c + out_w]).sum(2) * scale
+              + rel_bias[:, a + reach, c + reach].view(1, -1, 1, 1)
+              for a, c in slots]
     attn = torch.stack(logits, dim=2).softmax(dim=2)
-
     out = 0
-    for slot in range(kernel_size * kernel_size):
-        row, col = divmod(slot, kernel_size)
-        out = out + attn[:, :, slot:slot + 1] * value_pad[
-            ..., row:row + height, col:col + width]
+    for slot, (a, c) in enumerate(slots):
+        out = out + attn[:, :, slot:slot + 1] * value[..., a:a + out_h,
+                                                      c:c + out_w]
     return out
+
+
+def _attend_gathered(query: Tensor, key: Tensor, value: Tensor,
+                     rel_bias: Tensor, kernel_size: int, border: str,
+                     rows: Tensor, cols: Tensor) -> Tensor:
+    """Attention of the query cells ``rows x cols``, windows gathered.
+
+    Returns:
+        Tensor: Shape (B, heads, d_v, len(rows), len(cols)).
+    """
+    height, width = query.shape[-2:]
+    queries = query.index_select(3, rows).index_select(4, cols)
+    key_rows, row_in, bias_rows = _window_slots(height, kernel_size, border,
+                                                rows)
+    key_cols, col_in, bias_cols = _window_slots(width, kernel_size, border,
+                                                cols)
+    scale = 1.0 / math.sqrt(query.shape[2])
+    logits = []
+    for a in range(kernel_size):
+        keys_a = key.index_select(3, key_rows[a])
+        bias_a = rel_bias[:, bias_rows[a]]
+        for c in range(kernel_size):
+            logit = (queries * keys_a.index_select(4, key_cols[c])).sum(2)
+            logit = logit * scale + bias_a[:, :, bias_cols[c]]
+            inside = row_in[a].view(-1, 1) & col_in[c].view(1, -1)
+            logits.append(logit.masked_fill(~inside, float('-inf')))
+    attn = torch.stack(logits, dim=2).softmax(dim=2)
+    out = 0
+    for a in range(kernel_size):
+        values_a = value.index_select(3, key_rows[a])
+        for c in range(kernel_size):
+            slot = a * kernel_size + c
+            out = out + attn[:, :, slot:slot + 1] * values_a.index_select(
+                4, key_cols[c])
+    return out
+
+
+def _window_slots(size: int, kernel_size: int, border: str,
+                  positions: Tensor):
+    """Key index, inside-map flag and bias index per window slot.
+
+    Args:
+        size (int): Length of the axis.
+        kernel_size (int): Odd window size k.
+        border (str): One of :data:`BORDERS`.
+        positions (Tensor): Query positions on the axis. Shape (P,).
+
+    Returns:
+        tuple[Tensor, Tensor, Tensor]: Each Shape (k, P): the key position
+        clamped into the map, whether it lies inside, and
+        ``key - query + k - 1``.
+    """
+    start = window_starts(size, kernel_size, border, positions.device)
+    keys = start[positions].view(1, -1) + torch.arange(
+        kernel_size, device=positions.device).view(-1, 1)
+    inside = (keys >= 0) & (keys < size)
+    bias = keys - positions.view(1, -1) + kernel_size - 1
+    return keys.clamp(0, size - 1), inside, bias
 
 
 @MODELS.register_module()
 class NeighborhoodFusion(BaseModule):
     """Fuse a source BEV with a cross BEV by neighbourhood attention.
 
-    Implements eqs. 3-4 of SDG-OCC. The attended cross features are
-    concatenated with the source features, mixed by a 3x3 conv, and gated
-    per channel by ``sigmoid(Conv1x1(AvgPool(F)))``.
+    Implements eqs. 3-4 of SDG-OCC: the source gives the queries, the cross
+    BEV the keys and values (eq. 3); the attended cross features are
+    concatenated with the source features, mixed by a 3x3 conv-BN-ReLU and
+    gated per channel, ``F * sigmoid(Conv1x1(AvgPool(F)))`` (eq. 4).
+
+    Eq. 4 writes the gate on ``F_neighbor``, the attention output alone;
+    that would leave the source's own features out of the fused map except
+    through the attention weights. The gate here acts on the mix of both
+    (the source and its attended cross features), as the authors' released
+    code does (a 3x3 conv over the concatenation, then the pooled sigmoid
+    gate).
 
     Args:
         source_channels (int): Channels of the source BEV (queries).
@@ -100,6 +240,10 @@ class NeighborhoodFusion(BaseModule):
         num_heads (int): Attention heads. Defaults to 4.
         kernel_size (int): Neighbourhood size k (7 in the paper, Table 5).
             Defaults to 7.
+        border (str): Windows at the map border, one of :data:`BORDERS`:
+            ``'shift'`` (NAT's, ref. [3], every query sees k * k keys) or
+            ``'mask'`` (centred, cells outside the map dropped).
+            Defaults to 'shift'.
         init_cfg (dict, optional): mmengine initialisation config.
     """
 
@@ -110,6 +254,7 @@ class NeighborhoodFusion(BaseModule):
                  embed_dims: int = 64,
                  num_heads: int = 4,
                  kernel_size: int = 7,
+                 border: str = 'shift',
                  init_cfg: Optional[dict] = None):
         super().__init__(init_cfg=init_cfg)
         if embed_dims % num_heads != 0:
@@ -118,13 +263,20 @@ class NeighborhoodFusion(BaseModule):
         if kernel_size < 1 or kernel_size % 2 == 0:
             raise ValueError(f'kernel_size must be odd and >= 1, got '
                              f'{kernel_size}')
+        if border not in BORDERS:
+            raise ValueError(f'NeighborhoodFusion border must be one of '
+                             f'{BORDERS}, got {border!r}')
+        self.source_channels = source_channels
+        self.cross_channels = cross_channels
+        self.out_channels = out_channels
         self.num_heads = num_heads
         self.kernel_size = kernel_size
+        self.border = border
         self.query = nn.Conv2d(source_channels, embed_dims, 1)
         self.key = nn.Conv2d(cross_channels, embed_dims, 1)
         self.value = nn.Conv2d(cross_channels, embed_dims, 1)
-        self.rel_bias = nn.Parameter(
-            torch.zeros(num_heads, kernel_size * kernel_size))
+        span = 2 * kernel_size - 1
+        self.rel_bias = nn.Parameter(torch.zeros(num_heads, span, span))
         nn.init.trunc_normal_(self.rel_bias, std=0.02)
         self.proj = nn.Conv2d(embed_dims, out_channels, 1)
         self.mix = nn.Sequential(
@@ -161,9 +313,16 @@ class NeighborhoodFusion(BaseModule):
                              'W) and cross (B, C_c, H, W) on the same grid, '
                              f'got {tuple(source.shape)} and '
                              f'{tuple(cross.shape)}')
+        if source.shape[1] != self.source_channels \
+                or cross.shape[1] != self.cross_channels:
+            raise ValueError(
+                f'NeighborhoodFusion expects {self.source_channels} source '
+                f'(query) and {self.cross_channels} cross (key / value) '
+                f'channels, got {source.shape[1]} and {cross.shape[1]}')
         attended = neighborhood_attention(
             self._heads(self.query(source)), self._heads(self.key(cross)),
-            self._heads(self.value(cross)), self.rel_bias, self.kernel_size)
+            self._heads(self.value(cross)), self.rel_bias, self.kernel_size,
+            self.border)
         attended = self.proj(attended.flatten(1, 2))
         fused = self.mix(torch.cat([source, attended], dim=1))
         return fused * self.gate(fused)

@@ -1,29 +1,39 @@
-"""SDG-OCC detector: SDG-Fusion and SDG-KL.
+"""SDG-OCC detector: SDG-Fusion, SDG-KL and the camera-only rows.
 
-Implements the full model of SDG-OCC (Duan et al., CVPR 2025, Fig. 2):
+Implements the full model of SDG-OCC (Duan et al., CVPR 2025, Fig. 3):
 image backbone and FPN, the multi-task DepthNet (context, depth, 2D
 semantics), the SDG view transformation into a camera BEV, an SPVCNN LiDAR
 BEV, neighbourhood-attention fusion, the BEV encoder and the
 channel-to-height occupancy head.
 
-* ``variant='fusion'`` (SDG-Fusion): the LiDAR-dominant fusion of the
-  camera and LiDAR BEVs goes to the head, in training and inference.
-* ``variant='kl'`` (SDG-KL): in training the fusion is a teacher, supervised
-  by the occupancy loss, and FOAD distils it into the camera BEV, which is
-  also supervised; at inference the LiDAR encoder and the fusion are
-  skipped and the camera BEV (still guided by the LiDAR depth maps) goes to
-  the head.
+* ``variant='fusion'`` (SDG-Fusion, Fig. 5a): the camera BEV is the source
+  (queries) of the fusion and the LiDAR BEV the cross feature (keys,
+  values), Sec. 3.5; the fused BEV goes to the head, in training and
+  inference.
+* ``variant='kl'`` (SDG-KL, Fig. 5b): in training a LiDAR-dominant fusion
+  (LiDAR queries, camera keys and values) is a teacher, supervised by the
+  occupancy loss, and FOAD distils it into the camera BEV, which is also
+  supervised; at inference the LiDAR encoder and the fusion are skipped
+  and the camera BEV goes to the head.
+* ``variant='camera'`` (the Baseline and "+SDG" rows of Table 3): no LiDAR
+  encoder, no fusion; the camera BEV goes to the head. With the plain LSS
+  lift this is the FlashOcc-like baseline, which needs no LiDAR points at
+  all; with the SDG lift the points still guide the view transform.
+
+The camera BEV is one step, :meth:`SDGOcc.extract_camera_bev`: the view
+transform pools the lifted features, then a learned 3x3 conv-BN
+(``camera_bev_conv``) gives the BEV that the fusion, the head and FOAD see.
 """
 from typing import Dict, List, Optional, Sequence, Tuple
 
 from mmdet3d.registry import MODELS
-from torch import Tensor
+from torch import Tensor, nn
 
 from projects.occ_common.models.detectors import BaseOccDetector
 from .c2h_head import height_logits_to_xyz
 from .seg_targets import downsample_seg_labels
 
-_VARIANTS = ('fusion', 'kl')
+_VARIANTS = ('camera', 'fusion', 'kl')
 
 
 @MODELS.register_module()
@@ -42,22 +52,27 @@ class SDGOcc(BaseOccDetector):
         img_backbone (dict): Image backbone (e.g. ``mmdet.ResNet``).
         img_neck (dict): Image neck to stride ``downsample`` (``mmdet.FPN``);
             its first output is used.
-        depth_net (dict): ``DepthNet`` with ``seg_channels > 0``.
+        depth_net (dict): ``DepthNet``; ``seg_channels > 0`` for the SDG
+            lift.
         view_transform (dict): ``SDGViewTransform``.
         bev_encoder (dict): ``SDGBEVEncoder``.
         occ_head (dict): ``ChannelToHeightHead``.
-        lidar_encoder (dict): ``SPVCNNEncoder``; its BEV is the camera BEV
-            grid.
-        fusion (dict): ``NeighborhoodFusion`` with the LiDAR BEV as source
-            and the camera BEV as cross, output channels = camera BEV
-            channels.
         point_cloud_range (Sequence[float]): Occupancy grid range, metres.
         voxel_size (Sequence[float]): Occupancy voxel size, metres; one BEV
             cell per voxel column.
         num_classes (int): Occupancy classes, empty included.
         depth_bound (Sequence[float]): ``(min, max, step)`` of the depth
             bins, metres.
-        variant (str): ``'fusion'`` or ``'kl'``. Defaults to 'fusion'.
+        variant (str): ``'camera'``, ``'fusion'`` or ``'kl'``.
+            Defaults to 'fusion'.
+        lidar_encoder (dict, optional): ``SPVCNNEncoder``, its BEV on the
+            camera BEV grid; required by ``'fusion'`` and ``'kl'``, refused
+            by ``'camera'``. Defaults to None.
+        fusion (dict, optional): ``NeighborhoodFusion``; same variants as
+            ``lidar_encoder``. The detector gives it its widths: for
+            ``'fusion'`` the camera BEV is the source and the LiDAR BEV the
+            cross feature, for ``'kl'`` the other way round, and the output
+            has the camera BEV's width. Defaults to None.
         loss_distill (dict, optional): ``FOADDistillLoss``; required for
             ``'kl'``.
         loss_depth (dict, optional): ``DepthBCELoss``. Defaults to None.
@@ -67,11 +82,13 @@ class SDGOcc(BaseOccDetector):
         teacher_loss_weight (float): Factor of the teacher's occupancy
             losses in ``'kl'`` training. Defaults to 1.0.
         seg_empty_label (int, optional): 2D semantic target of feature
-            cells that no labelled LiDAR return hits. The lidarseg labels
-            are 1..16, so class 0 is free to mean "background" (sky, beyond
-            the LiDAR's reach): predicting it there keeps the semantic
-            diffusion from spreading depth into those cells. None ignores
-            them instead. Defaults to 0.
+            cells that no labelled LiDAR return hits. None (the default)
+            ignores them: nothing says what such a cell shows, and a label
+            of 0 there would teach the head to predict "no class" exactly
+            where LiDAR depth is missing, which is where eq. 2 of the
+            semantic diffusion then refuses to fill a depth (on the tiny
+            synthetic world's two key frames it filled 5 and 11 of 1,056
+            cells instead of 292 and 271).
         downsample (int): Image-to-feature stride. Defaults to 16.
         **kwargs: ``empty_index``, ``ignore_index``, ``loss_mask_key``,
             ``data_preprocessor`` and ``init_cfg`` of
@@ -85,18 +102,18 @@ class SDGOcc(BaseOccDetector):
                  view_transform: dict,
                  bev_encoder: dict,
                  occ_head: dict,
-                 lidar_encoder: dict,
-                 fusion: dict,
                  point_cloud_range: Sequence[float],
                  voxel_size: Sequence[float],
                  num_classes: int,
                  depth_bound: Sequence[float],
                  variant: str = 'fusion',
+                 lidar_encoder: Optional[dict] = None,
+                 fusion: Optional[dict] = None,
                  loss_distill: Optional[dict] = None,
                  loss_depth: Optional[dict] = None,
                  loss_seg: Optional[dict] = None,
                  teacher_loss_weight: float = 1.0,
-                 seg_empty_label: Optional[int] = 0,
+                 seg_empty_label: Optional[int] = None,
                  downsample: int = 16,
                  **kwargs):
         super().__init__(
@@ -106,11 +123,7 @@ class SDGOcc(BaseOccDetector):
             depth_bound=depth_bound,
             loss_depth=loss_depth,
             **kwargs)
-        if variant not in _VARIANTS:
-            raise ValueError(f'SDGOcc variant must be one of {_VARIANTS}, '
-                             f'got {variant!r}')
-        if variant == 'kl' and loss_distill is None:
-            raise ValueError("SDGOcc(variant='kl') needs a loss_distill")
+        self._check_variant(variant, lidar_encoder, fusion, loss_distill)
         self.variant = variant
         self.downsample = int(downsample)
         self.teacher_loss_weight = float(teacher_loss_weight)
@@ -124,24 +137,77 @@ class SDGOcc(BaseOccDetector):
             depth_net, depth_bound=self.depth_bound)
         self.view_transform = self.build_child(
             view_transform, depth_bound=self.depth_bound, **grid)
+        cam_channels = self.depth_net.context_channels
+        # FOAD's student must be a feature the camera branch can change on
+        # the inactive region IR (LiDAR occupied, camera BEV empty). The
+        # pooled BEV is exactly 0 there whatever the weights, so (T - S)^2
+        # on IR would be a constant: eq. 8 distils at F_bev^C "through BEV
+        # pooling", here at one learned layer after it. A 3x3 conv reaches
+        # the IR cells next to camera-covered ones (LSS leaves gaps between
+        # its rays, Fig. 2) and BN's shift reaches every cell; no ReLU, so
+        # no cell's gradient is cut. The fusion, the head and FOAD all see
+        # this BEV, in every variant, so Table 3's rows differ only in what
+        # they ablate.
+        self.camera_bev_conv = nn.Sequential(
+            nn.Conv2d(cam_channels, cam_channels, 3, padding=1, bias=False),
+            nn.BatchNorm2d(cam_channels))
         self.bev_encoder = MODELS.build(bev_encoder)
         self.occ_head = self.build_child(
             occ_head, dz=self.occ_shape[2], **self.head_defaults())
         self.lidar_encoder = self.build_child(lidar_encoder, **grid)
-        self.fusion = MODELS.build(fusion)
+        self.fusion = None
+        if fusion:
+            self.fusion = self.build_child(
+                fusion, **self._fusion_channels(cam_channels))
+            self.check_child(self.fusion,
+                             **self._fusion_channels(cam_channels))
         self.loss_distill = self.build_child(loss_distill)
         self.loss_seg = self.build_child(loss_seg)
         for child in (self.depth_net, self.view_transform, self.loss_depth):
             if child is not None:
                 self.check_child(child, depth_bound=self.depth_bound)
         for child in (self.view_transform, self.lidar_encoder):
-            self.check_child(child, **grid)
+            if child is not None:
+                self.check_child(child, **grid)
         self.check_child(
             self.occ_head, dz=self.occ_shape[2], num_classes=num_classes)
         self.check_child(
             self.occ_head.loss_occ,
             empty_index=self.empty_index,
             ignore_index=self.ignore_index)
+
+    @staticmethod
+    def _check_variant(variant, lidar_encoder, fusion, loss_distill) -> None:
+        """Refuse a variant configured with the wrong branches."""
+        if variant not in _VARIANTS:
+            raise ValueError(f'SDGOcc variant must be one of {_VARIANTS}, '
+                             f'got {variant!r}')
+        if variant == 'camera':
+            if lidar_encoder or fusion or loss_distill:
+                raise ValueError(
+                    "SDGOcc(variant='camera') has no LiDAR branch: set "
+                    'lidar_encoder, fusion and loss_distill to None')
+        elif not (lidar_encoder and fusion):
+            raise ValueError(f'SDGOcc(variant={variant!r}) needs a '
+                             'lidar_encoder and a fusion')
+        if variant == 'kl' and not loss_distill:
+            raise ValueError("SDGOcc(variant='kl') needs a loss_distill")
+        if variant == 'fusion' and loss_distill:
+            raise ValueError("SDGOcc(variant='fusion') does not distil; set "
+                             'loss_distill to None')
+
+    def _fusion_channels(self, cam_channels: int) -> Dict[str, int]:
+        """Widths of the fusion: its source (query) is the camera BEV for
+        SDG-Fusion and the LiDAR BEV for SDG-KL's teacher; its output has
+        the camera BEV's width (the student's, for FOAD)."""
+        lidar_channels = self.lidar_encoder.out_channels
+        source, cross = ((cam_channels, lidar_channels)
+                         if self.variant == 'fusion' else
+                         (lidar_channels, cam_channels))
+        return dict(
+            source_channels=source,
+            cross_channels=cross,
+            out_channels=cam_channels)
 
     # ------------------------------------------------------------------
     # Features
@@ -169,19 +235,20 @@ class SDGOcc(BaseOccDetector):
                              f'images {tuple(imgs.shape)}')
         return feats
 
-    def extract_camera_bev(self, inputs: dict, data_samples: Sequence
-                           ) -> Tuple[Dict[str, Tensor], Dict[str, Tensor]]:
-        """DepthNet outputs and the SDG camera BEV.
+    def lift_camera_bev(self, inputs: dict, data_samples: Sequence
+                        ) -> Tuple[Dict[str, Tensor], Dict[str, Tensor]]:
+        """DepthNet outputs and the pooled camera BEV of the view transform.
 
         Args:
-            inputs (dict): ``imgs`` (B, N, 3, H, W) and ``points`` (list of
-                (P_b, C) tensors).
+            inputs (dict): ``imgs`` (B, N, 3, H, W) and, when the SDG lift
+                is on, ``points`` (list of (P_b, C) tensors).
             data_samples (Sequence[Det3DDataSample]): Carry ``lidar2img``
-                (N, 4, 4) in their metainfo.
+                (N, 4, 4) in their metainfo (and ``points_time_dim`` when
+                sweeps were merged).
 
         Returns:
             tuple[dict, dict]: The DepthNet outputs and the view-transform
-            outputs (``bev``, ``bev_mask``, ...).
+            outputs (``bev`` pooled, ``bev_mask``, ...).
         """
         imgs = inputs['imgs']
         feats = self.extract_img_feat(imgs)
@@ -195,43 +262,91 @@ class SDGOcc(BaseOccDetector):
             raise ValueError(f'SDGOcc: lidar2img {tuple(lidar2img.shape)} '
                              f'does not match the images '
                              f'{tuple(imgs.shape[:2])} (B, N)')
+        points, time_dims = None, None
+        if self.view_transform.use_sdg:
+            points = self._points(inputs, 'the SDG view transform is guided '
+                                  'by LiDAR depth')
+            time_dims = [s.metainfo.get('points_time_dim')
+                         for s in data_samples]
         cam = self.view_transform(depth_out['context'], depth_out['depth'],
-                                  depth_out.get('seg_logits'),
-                                  self._points(inputs), lidar2img,
-                                  imgs.shape[-2:])
+                                  depth_out.get('seg_logits'), points,
+                                  lidar2img, imgs.shape[-2:], time_dims)
+        return depth_out, cam
+
+    def extract_camera_bev(self, inputs: dict, data_samples: Sequence
+                           ) -> Tuple[Dict[str, Tensor], Dict[str, Tensor]]:
+        """DepthNet outputs and the camera BEV F_bev^C.
+
+        :meth:`lift_camera_bev`, then ``camera_bev_conv``.
+
+        Returns:
+            tuple[dict, dict]: The DepthNet outputs and the view-transform
+            outputs with ``bev`` (B, C, Y, X) after the learned layer and
+            ``bev_pooled``, the view transform's own; ``bev_mask`` (B, 1,
+            Y, X) stays the pooled coverage (FOAD's M_img).
+        """
+        depth_out, cam = self.lift_camera_bev(inputs, data_samples)
+        cam['bev_pooled'] = cam['bev']
+        cam['bev'] = self.camera_bev_conv(cam['bev'])
         return depth_out, cam
 
     @staticmethod
-    def _points(inputs: dict) -> List[Tensor]:
+    def _points(inputs: dict, why: str) -> List[Tensor]:
         if 'points' not in inputs:
-            raise ValueError('SDGOcc needs inputs["points"]: the SDG view '
-                             'transform is guided by LiDAR depth')
+            raise ValueError(f'SDGOcc needs inputs["points"]: {why}')
         return list(inputs['points'])
 
     def extract_lidar_bev(self, inputs: dict) -> Dict[str, Tensor]:
         """LiDAR BEV ``bev`` (B, C, Y, X) and ``bev_mask`` (B, 1, Y, X)."""
-        return self.lidar_encoder(self._points(inputs))
+        return self.lidar_encoder(
+            self._points(inputs, 'the LiDAR encoder encodes them'))
 
     def fuse(self, lidar: Dict[str, Tensor], cam: Dict[str, Tensor]
              ) -> Tensor:
-        """LiDAR-dominant fusion: LiDAR BEV as source, camera as cross."""
+        """SDG-Fusion: camera queries, LiDAR keys and values; SDG-KL's
+        teacher: LiDAR queries, camera keys and values (Sec. 3.5)."""
         if lidar['bev'].shape[-2:] != cam['bev'].shape[-2:]:
             raise ValueError(f'SDGOcc: LiDAR BEV {tuple(lidar["bev"].shape)}'
                              f' and camera BEV {tuple(cam["bev"].shape)} '
                              'are not on the same grid')
+        if self.variant == 'fusion':
+            return self.fusion(cam['bev'], lidar['bev'])
         return self.fusion(lidar['bev'], cam['bev'])
 
     def extract_feat(self, inputs: dict, data_samples: Sequence) -> Tensor:
         """The BEV the head sees at inference. Shape (B, C, Y, X)."""
         _, cam = self.extract_camera_bev(inputs, data_samples)
-        if self.variant == 'kl':
-            # SDG-KL's inference path: no LiDAR encoder, no fusion.
+        if self.variant != 'fusion':
+            # The camera rows and SDG-KL's inference: no LiDAR encoder, no
+            # fusion.
             return cam['bev']
         return self.fuse(self.extract_lidar_bev(inputs), cam)
 
     # ------------------------------------------------------------------
     # mmengine contract
     # ------------------------------------------------------------------
+    def seg_targets(self, data_samples: Sequence,
+                    gt_depth: Tensor) -> Tensor:
+        """2D semantic targets at feature resolution.
+
+        The label of the nearest labelled LiDAR return of each feature cell
+        (:func:`downsample_seg_labels`); cells without one get
+        ``seg_empty_label`` (by default the ignore label 255).
+
+        Args:
+            data_samples (Sequence[Det3DDataSample]): With ``gt_seg_2d``
+                Shape (N, H, W).
+            gt_depth (Tensor): From :meth:`gt_depth`. Shape (B * N, H, W).
+
+        Returns:
+            Tensor: Long labels. Shape (B * N, H / s, W / s).
+        """
+        gt_seg = self.stack_field(data_samples, 'gt_seg_2d',
+                                  gt_depth.device).flatten(0, 1)
+        return downsample_seg_labels(
+            gt_seg, gt_depth, self.downsample,
+            empty_label=self.seg_empty_label)
+
     def _aux_losses(self, depth_out: Dict[str, Tensor],
                     data_samples: Sequence, device) -> Dict[str, Tensor]:
         """Depth and 2D semantic losses of the DepthNet."""
@@ -244,11 +359,7 @@ class SDGOcc(BaseOccDetector):
             if 'seg_logits' not in depth_out:
                 raise ValueError('SDGOcc: loss_seg needs a DepthNet with '
                                  'seg_channels > 0')
-            gt_seg = self.stack_field(data_samples, 'gt_seg_2d',
-                                      device).flatten(0, 1)
-            target = downsample_seg_labels(
-                gt_seg, gt_depth, self.downsample,
-                empty_label=self.seg_empty_label)
+            target = self.seg_targets(data_samples, gt_depth)
             logits = depth_out['seg_logits']
             losses['loss_seg'] = self.loss_seg(
                 logits.permute(0, 2, 3, 1).reshape(-1, logits.shape[1]),
@@ -259,7 +370,8 @@ class SDGOcc(BaseOccDetector):
         """Training losses.
 
         Args:
-            inputs (dict): ``imgs`` (B, N, 3, H, W), ``points``.
+            inputs (dict): ``imgs`` (B, N, 3, H, W), ``points`` (unless the
+                variant is ``'camera'`` with the plain LSS lift).
             data_samples (Sequence[Det3DDataSample]): With ``gt_occ`` (X, Y,
                 Z), the ``loss_mask_key`` mask if set, ``gt_depth`` and
                 ``gt_seg_2d`` (N, H, W), and the camera metainfo.
@@ -272,6 +384,10 @@ class SDGOcc(BaseOccDetector):
         depth_out, cam = self.extract_camera_bev(inputs, data_samples)
         gt_occ = self.occupancy_targets(data_samples, device)
         losses = self._aux_losses(depth_out, data_samples, device)
+        if self.variant == 'camera':
+            losses.update(
+                self.occ_head.loss(self.bev_encoder(cam['bev']), gt_occ))
+            return losses
         lidar = self.extract_lidar_bev(inputs)
         fused = self.fuse(lidar, cam)
         if self.variant == 'fusion':
@@ -285,7 +401,9 @@ class SDGOcc(BaseOccDetector):
             for key, value in teacher.items()
         })
         # The teacher's region is where the LiDAR identified something (the
-        # "LiDAR-identified regions" of FOAD), not the whole fused map.
+        # "LiDAR-identified regions" of FOAD), not the whole fused map; the
+        # camera region is the pooled coverage, the student the BEV after
+        # camera_bev_conv (see __init__).
         losses['loss_distill'] = self.loss_distill(
             cam['bev'], fused, lidar['bev_mask'], cam['bev_mask'])
         return losses
@@ -294,7 +412,9 @@ class SDGOcc(BaseOccDetector):
         """Occupancy of every sample.
 
         Args:
-            inputs (dict): ``imgs`` (B, N, 3, H, W), ``points``.
+            inputs (dict): ``imgs`` (B, N, 3, H, W); ``points`` for the SDG
+                lift and for SDG-Fusion's LiDAR encoder (the camera-only
+                LSS baseline runs without them).
             data_samples (Sequence[Det3DDataSample]): Camera metainfo.
 
         Returns:

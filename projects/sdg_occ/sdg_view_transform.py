@@ -1,13 +1,14 @@
 """Semantic- and depth-guided (SDG) view transformation.
 
-Implements Sec. 3.2 of SDG-OCC (Duan et al., CVPR 2025), eqs. 1-2 and
-Fig. 4: LiDAR points are projected into every camera as a sparse depth map
-at feature resolution; semantic diffusion (eq. 1) spreads their depth
-inside the predicted semantic regions; every pixel with an extended depth
-spawns a few virtual points around it (bilinear incremental
-discretization, eq. 2) weighted by its predicted depth distribution; the
-remaining pixels fall back to the plain LSS lift over all depth bins. The
-features of all lifted points are pooled into the camera BEV.
+Implements Sec. 3.4 of SDG-OCC (Duan et al., CVPR 2025), eqs. 1-2 and
+Fig. 4: the key-frame LiDAR points are projected into every camera as a
+sparse depth map at feature resolution; semantic diffusion (eqs. 1-2)
+spreads their depth inside the predicted semantic regions; every pixel
+with an extended depth spawns a few virtual points around it (bidirectional
+linear incremental discretization) weighted by its predicted depth
+distribution; the remaining pixels fall back to the plain LSS lift over
+all depth bins. The features of all lifted points are pooled into the
+camera BEV.
 """
 from typing import Dict, List, Optional, Sequence
 
@@ -26,6 +27,42 @@ from .semantic_diffusion import semantic_depth_diffusion
 from .virtual_points import bilinear_incremental_discretization
 
 _FALLBACKS = ('lss', 'none')
+
+
+def key_frame_points(points: Sequence[Tensor],
+                     time_dims: Optional[Sequence[Optional[int]]] = None
+                     ) -> List[Tensor]:
+    """The key-frame points of every sample (time lag 0).
+
+    Merged sweeps smear moving objects (a car now at 20 m whose return
+    0.45 s earlier was 4.5 m nearer), so the guidance depth maps use the
+    key frame only, as the depth supervision does (``PointsToDepthMaps``)
+    and as the authors' released config does (one sweep). The rule is that
+    of ``PointsToDepthMaps``: without a time column every point is a
+    key-frame point.
+
+    Args:
+        points (Sequence[Tensor]): Per sample, Shape (P_b, C).
+        time_dims (Sequence[int | None], optional): Per sample, the column
+            of the time lag (``points_time_dim`` of
+            ``LoadOccPointsFromMultiSweeps``), None where no sweeps were
+            merged. Defaults to None (no sample has one).
+
+    Returns:
+        list[Tensor]: Per sample, the rows with time lag 0.
+    """
+    if time_dims is None:
+        return list(points)
+    if len(time_dims) != len(points):
+        raise ValueError(f'key_frame_points got {len(time_dims)} time '
+                         f'columns for {len(points)} point clouds')
+    out = []
+    for b, (pts, dim) in enumerate(zip(points, time_dims)):
+        if dim is not None and not 0 <= dim < pts.shape[1]:
+            raise ValueError(f'points of sample {b} have {pts.shape[1]} '
+                             f'columns, no time column {dim}')
+        out.append(pts if dim is None else pts[pts[:, dim] == 0])
+    return out
 
 
 def points_to_depth_maps(points: Sequence[Tensor], lidar2img: Tensor,
@@ -75,10 +112,12 @@ class SDGViewTransform(BaseModule):
         depth_bound (Sequence[float]): (dmin, dmax, step) of the depth bins.
         diffusion_radius (float): Radius, in feature-map pixels, of the
             semantic diffusion. Defaults to 2.0.
-        layer_radius (float): Half width r, metres, of the virtual-point
-            interval (1 m in the paper, Table 4). Defaults to 1.0.
-        num_layers (int): Virtual points per pixel (8 in the paper).
-            Defaults to 8.
+        layer_radius (float): Range r, metres, of the virtual points: they
+            span [d - r, d + r] (1 m in the paper, Table 4). Defaults to
+            1.0.
+        num_layers (int): Layers l per direction: 2 l + 1 virtual points
+            per pixel, r / l apart (8 in the paper; see
+            :mod:`.virtual_points` for this reading). Defaults to 8.
         fallback (str): Lift of pixels without an extended depth: ``'lss'``
             (all bins, weighted by the depth distribution) or ``'none'``
             (dropped). Defaults to 'lss'.
@@ -170,9 +209,12 @@ class SDGViewTransform(BaseModule):
             weight_index=flat)
 
     def forward(self, context: Tensor, depth_prob: Tensor,
-                seg_logits: Optional[Tensor], points: Sequence[Tensor],
+                seg_logits: Optional[Tensor],
+                points: Optional[Sequence[Tensor]],
                 lidar2img: Tensor,
-                img_shape: Sequence[int]) -> Dict[str, Tensor]:
+                img_shape: Sequence[int],
+                points_time_dims: Optional[Sequence[Optional[int]]] = None
+                ) -> Dict[str, Tensor]:
         """Lift image features into the camera BEV.
 
         Args:
@@ -181,17 +223,24 @@ class SDGViewTransform(BaseModule):
             seg_logits (Tensor, optional): Semantic logits; their argmax is
                 the class map of the diffusion (class 0 is background).
                 Required when ``use_sdg``. Shape (B * N, S, h, w).
-            points (Sequence[Tensor]): Per sample LiDAR points in the working
-                frame. Shape (P_b, C >= 3).
+            points (Sequence[Tensor], optional): Per sample LiDAR points in
+                the working frame; only the key frame guides the lift (see
+                :func:`key_frame_points`). Required when ``use_sdg``.
+                Shape (P_b, C >= 3).
             lidar2img (Tensor): Working frame to augmented pixels.
                 Shape (B, N, 4, 4).
             img_shape (Sequence[int]): Network input (H, W).
+            points_time_dims (Sequence[int | None], optional): Per sample,
+                the time-lag column of ``points`` (None: no merged sweeps).
+                Defaults to None.
 
         Returns:
             dict[str, Tensor]: ``bev`` (B, C, Y, X); ``bev_mask`` (B, 1, Y,
-            X) bool, cells that received a point; ``ext_depth`` (B * N, h,
-            w), the diffused depth; ``num_sdg_points`` and
-            ``num_lss_points``, long scalars, points pooled by each lift.
+            X) bool, cells that received a point; with ``use_sdg``
+            ``sparse_depth`` (B * N, h, w), the key-frame LiDAR depth, and
+            ``ext_depth``, the diffused depth, same shape;
+            ``num_sdg_points`` and ``num_lss_points``, long scalars, points
+            pooled by each lift.
         """
         batch, num_cams = lidar2img.shape[:2]
         num_m, _, feat_h, feat_w = context.shape
@@ -217,13 +266,17 @@ class SDGViewTransform(BaseModule):
                 raise ValueError('SDGViewTransform(use_sdg=True) needs '
                                  f'seg_logits of shape ({num_m}, S, {feat_h}'
                                  f', {feat_w}), got {got}')
+            if points is None:
+                raise ValueError('SDGViewTransform(use_sdg=True) is guided '
+                                 'by LiDAR depth and needs the points')
             with torch.no_grad():
-                sparse = points_to_depth_maps(points, lidar2img.float(),
-                                              img_shape, (feat_h, feat_w))
+                sparse = points_to_depth_maps(
+                    key_frame_points(points, points_time_dims),
+                    lidar2img.float(), img_shape, (feat_h, feat_w))
                 ext_depth = semantic_depth_diffusion(
                     sparse, seg_logits.argmax(dim=1), self.diffusion_radius)
             has_ext = ext_depth > 0
-            out['ext_depth'] = ext_depth
+            out.update(sparse_depth=sparse, ext_depth=ext_depth)
             depths, vp_weights, valid = bilinear_incremental_discretization(
                 ext_depth.to(depth_prob.dtype), depth_prob, self.depth_bound,
                 self.layer_radius, self.num_layers)

@@ -1,7 +1,7 @@
 """Semantic depth diffusion of sparse LiDAR depth maps.
 
 Implements the semantic diffusion step of SDG-OCC's view transformation
-(Duan et al., CVPR 2025, Sec. 3.2, eq. 1 and Fig. 4): a pixel with a
+(Duan et al., CVPR 2025, Sec. 3.4, eqs. 1-2 and Fig. 4): a pixel with a
 foreground class borrows the mean depth of the LiDAR returns of the same
 class around it, so that the sparse LiDAR depth spreads along objects but
 never across a semantic boundary.

@@ -37,6 +37,10 @@ KL_KEYS = {
     'variant', 'loss_distill.type', 'loss_distill.alpha',
     'loss_distill.beta', 'loss_distill.loss_weight', 'teacher_loss_weight'
 }
+#: Table 3's rows without the SDG lift also drop its semantic head.
+NO_SDG_KEYS = {'view_transform.use_sdg', 'depth_net.seg_channels', 'loss_seg'}
+#: Table 3's camera-only rows: no LiDAR encoder, no fusion.
+CAMERA_KEYS = {'variant', 'lidar_encoder', 'fusion'}
 DELTAS = {
     FUSION: (MODEL_BASE, COUPLED | {'loss_mask_key'}),
     # SurroundOcc: a LiDAR voxel that divides the 0.5 m cell and the SCAL
@@ -49,9 +53,10 @@ DELTAS = {
     KL: (FUSION, KL_KEYS),
     _main('kl', 'surroundocc-nus'): (FUSION_SOCC, KL_KEYS),
     TINY[1]: (TINY[0], KL_KEYS),
-    # Table 3 (LSS baseline, FOAD only), 4 (r x layers) and 5 (k).
-    'sdgocc-fusion-lss': (FUSION, {'view_transform.use_sdg'}),
-    'sdgocc-kl-lss': (KL, {'view_transform.use_sdg'}),
+    # Table 3: Baseline, +SDG, +FOAD (SDG + FOAD is FUSION itself).
+    'sdgocc-camera-lss': (FUSION, CAMERA_KEYS | NO_SDG_KEYS),
+    'sdgocc-camera-sdg': (FUSION, CAMERA_KEYS),
+    'sdgocc-fusion-lss': (FUSION, NO_SDG_KEYS),
 }
 
 
@@ -61,7 +66,7 @@ def _name(path):
 
 def test_config_inventory():
     """Both variants on both datasets, two tiny configs and the deltas of
-    Tables 3 (2 files; SDG only is the main fusion config), 4 (6) and 5
+    Tables 3 (3 files; SDG + FOAD is the main fusion config), 4 (6) and 5
     (4)."""
     names = {osp.basename(p) for p in MAIN}
     for variant in ('fusion', 'kl'):
@@ -69,7 +74,11 @@ def test_config_inventory():
             assert osp.basename(_main(variant, dataset)) in names
         assert (f'sdgocc-{variant}_tiny_1xb1-6e_occ3d-nus-synthetic.py'
                 in names)
-    assert len(ABLATIONS) == 12
+    assert len(ABLATIONS) == 13
+    table3 = sorted(_name(p) for p in ABLATIONS if _name(p) in DELTAS)
+    assert table3 == [
+        'sdgocc-camera-lss', 'sdgocc-camera-sdg', 'sdgocc-fusion-lss'
+    ]
 
 
 @pytest.mark.parametrize(
@@ -108,8 +117,10 @@ def test_coupled_values_come_from_the_dataset_base(path):
     model = cfg.model
     assert model.type == 'SDGOcc'
     assert model.variant == ('kl' if 'sdgocc-kl' in path else 'fusion')
-    assert model.fusion.out_channels == model.depth_net.context_channels
     assert model.loss_depth.loss_weight == 0.05
+    # The fusion's widths come from the detector, by variant.
+    assert not {'source_channels', 'cross_channels',
+                'out_channels'} & set(model.fusion)
 
 
 def test_ablation_knobs():
@@ -123,5 +134,7 @@ def test_ablation_knobs():
         elif match := re.search(r'-k(\d)_', name):
             assert model.fusion.kernel_size == int(match[1])
         else:
-            assert '-lss_' in name
-            assert model.view_transform.use_sdg is False
+            assert model.view_transform.use_sdg is ('-lss_' not in name)
+            camera = '-camera-' in name
+            assert (model.variant == 'camera') is camera
+            assert (model.lidar_encoder is None) is camera

@@ -5,29 +5,44 @@ import pytest
 import torch
 
 from projects.sdg_occ import NeighborhoodFusion, neighborhood_attention
+from projects.sdg_occ.neighborhood_fusion import window_starts
 
 
-def _naive_attention(q, k, v, bias, ksize):
-    """Per-pixel loop: softmax over the in-map cells of the centred window.
+def _window(i, length, ksize, border):
+    """Window rows (or columns) of query i, written as NAT describes it.
 
-    Window slot s = a * ksize + b holds offset (a - r, b - r), r = ksize//2.
+    'shift': a centred window, moved inside the map where it would cross
+    the border (NATTEN: start 0 near the start, length - k near the end).
+    'mask': the centred window, cells outside the map removed.
     """
-    batch, heads, dims, height, width = q.shape
     r = ksize // 2
+    if border == 'mask':
+        return [p for p in range(i - r, i + r + 1) if 0 <= p < length]
+    if i < r:
+        start = 0
+    elif i + r >= length:
+        start = length - ksize
+    else:
+        start = i - r
+    return list(range(start, start + ksize))
+
+
+def _naive_attention(q, k, v, bias, ksize, border):
+    """Per-query loop over the keys of the window; the bias of key (p, q')
+    for query (i, j) is bias[h, p - i + k - 1, q' - j + k - 1]."""
+    batch, heads, dims, height, width = q.shape
     out = torch.zeros(batch, heads, v.shape[2], height, width)
     for b in range(batch):
         for h in range(heads):
             for i in range(height):
                 for j in range(width):
                     logits, values = [], []
-                    for a in range(ksize):
-                        for c in range(ksize):
-                            p, q_ = i + a - r, j + c - r
-                            if not (0 <= p < height and 0 <= q_ < width):
-                                continue
+                    for p in _window(i, height, ksize, border):
+                        for q_ in _window(j, width, ksize, border):
                             logit = (q[b, h, :, i, j] * k[b, h, :, p, q_]
                                      ).sum() / math.sqrt(dims)
-                            logits.append(logit + bias[h, a * ksize + c])
+                            logits.append(logit + bias[h, p - i + ksize - 1,
+                                                       q_ - j + ksize - 1])
                             values.append(v[b, h, :, p, q_])
                     attn = torch.softmax(torch.stack(logits), dim=0)
                     out[b, h, :, i, j] = (attn[:, None] *
@@ -35,35 +50,76 @@ def _naive_attention(q, k, v, bias, ksize):
     return out
 
 
+@pytest.mark.parametrize('border', ['shift', 'mask'])
 @pytest.mark.parametrize('ksize', [1, 3, 5])
-def test_matches_naive_per_pixel_loop(ksize):
+def test_matches_naive_per_query_loop(ksize, border):
+    """A 6 x 7 map is larger than every window, so border and interior
+    queries both occur; the bias table is random."""
     gen = torch.Generator().manual_seed(ksize)
-    q = torch.randn(2, 2, 3, 4, 5, generator=gen)
-    k = torch.randn(2, 2, 3, 4, 5, generator=gen)
-    v = torch.randn(2, 2, 2, 4, 5, generator=gen)
-    bias = torch.randn(2, ksize * ksize, generator=gen)
-    out = neighborhood_attention(q, k, v, bias, ksize)
-    ref = _naive_attention(q, k, v, bias, ksize)
+    q = torch.randn(2, 2, 3, 6, 7, generator=gen)
+    k = torch.randn(2, 2, 3, 6, 7, generator=gen)
+    v = torch.randn(2, 2, 2, 6, 7, generator=gen)
+    bias = torch.randn(2, 2 * ksize - 1, 2 * ksize - 1, generator=gen)
+    out = neighborhood_attention(q, k, v, bias, ksize, border)
+    ref = _naive_attention(q, k, v, bias, ksize, border)
     assert torch.allclose(out, ref, atol=1e-5)
 
 
-def test_by_hand_uniform_keys():
-    """Zero queries and zero bias give uniform weights over in-map cells.
+def _key_count(height, width, ksize, border, query):
+    """Keys a query attends to, read from the output: with zero queries,
+    keys and bias the attention is uniform, 1 / n over its n keys, so with
+    a value of 1 at the query's own cell and 0 elsewhere the output there
+    is 1 / n."""
+    zeros = torch.zeros(1, 1, 1, height, width)
+    value = torch.zeros(1, 1, 1, height, width)
+    value[..., query[0], query[1]] = 1.0
+    bias = torch.zeros(1, 2 * ksize - 1, 2 * ksize - 1)
+    out = neighborhood_attention(zeros, zeros, value, bias, ksize, border)
+    return round(1.0 / out[0, 0, 0, query[0], query[1]].item())
 
-    1 x 3 map, values (1, 2, 4), k = 3: the left cell averages (1, 2) ->
-    1.5, the middle (1, 2, 4) -> 7/3, the right (2, 4) -> 3; a bias of
-    ln 2 on the right neighbour slot (a=1, c=2 -> slot 5) doubles its
-    weight: middle -> (1 + 2 + 2*4) / 4 = 2.75, left -> (1 + 2*2) / 3.
+
+def test_border_queries_see_k_squared_keys_when_shifted():
+    """k = 7 on a 10 x 12 map. Shifted (NAT): the corner (0, 0), the edge
+    cell (0, 5) and the interior (5, 6) each see 7 * 7 = 49 keys. Masked:
+    the corner sees rows 0..3 x columns 0..3 = 16, the edge rows 0..3 x
+    columns 2..8 = 28, the interior 49."""
+    for query, shifted, masked in (((0, 0), 49, 16), ((0, 5), 49, 28),
+                                   ((5, 6), 49, 49)):
+        assert _key_count(10, 12, 7, 'shift', query) == shifted
+        assert _key_count(10, 12, 7, 'mask', query) == masked
+
+
+def test_window_starts_by_hand():
+    """k = 3 on 5 cells: shifted starts 0, 0, 1, 2, 2 (the windows 0-2,
+    0-2, 1-3, 2-4, 2-4); masked -1, 0, 1, 2, 3. A map of 2 cells is smaller
+    than the window: it starts at 0 and the third row is masked."""
+    assert window_starts(5, 3, 'shift').tolist() == [0, 0, 1, 2, 2]
+    assert window_starts(5, 3, 'mask').tolist() == [-1, 0, 1, 2, 3]
+    assert window_starts(2, 3, 'shift').tolist() == [0, 0]
+    assert _key_count(2, 2, 3, 'shift', (0, 0)) == 4
+
+
+def test_by_hand_uniform_keys_and_shifted_bias():
+    """1 x 3 map, values (1, 2, 4), k = 3 (the map is one row: rows beyond
+    it are masked in both modes).
+
+    Shifted windows: every query sees the 3 cells -> 7/3 each. Masked: the
+    left cell averages (1, 2) -> 1.5, the middle 7/3, the right (2, 4) ->
+    3. A bias of ln 2 at column offset +2 (table column 2 + 2 = 4) doubles
+    the weight of the key two cells to the right, which only the shifted
+    window of the left query reaches: left -> (1 + 2 + 2*4) / 4 = 2.75.
     """
     q = torch.zeros(1, 1, 1, 1, 3)
     k = torch.zeros(1, 1, 1, 1, 3)
     v = torch.tensor([1.0, 2.0, 4.0]).view(1, 1, 1, 1, 3)
-    out = neighborhood_attention(q, k, v, torch.zeros(1, 9), 3)
+    bias = torch.zeros(1, 5, 5)
+    out = neighborhood_attention(q, k, v, bias, 3, 'shift')
+    assert torch.allclose(out.flatten(), torch.full((3, ), 7 / 3))
+    out = neighborhood_attention(q, k, v, bias, 3, 'mask')
     assert torch.allclose(out.flatten(), torch.tensor([1.5, 7 / 3, 3.0]))
-    bias = torch.zeros(1, 9)
-    bias[0, 5] = math.log(2.0)
-    out = neighborhood_attention(q, k, v, bias, 3)
-    assert torch.allclose(out.flatten(), torch.tensor([5 / 3, 2.75, 3.0]))
+    bias[0, 2, 4] = math.log(2.0)
+    out = neighborhood_attention(q, k, v, bias, 3, 'shift')
+    assert torch.allclose(out.flatten(), torch.tensor([2.75, 7 / 3, 7 / 3]))
 
 
 def test_fusion_forward_backward_and_gate_range():
@@ -81,7 +137,7 @@ def test_fusion_forward_backward_and_gate_range():
     out.pow(2).mean().backward()
     assert source.grad.abs().sum() > 0 and cross.grad.abs().sum() > 0
     assert fusion.rel_bias.grad is not None
-    assert fusion.rel_bias.shape == (2, 9)
+    assert fusion.rel_bias.shape == (2, 5, 5)
 
 
 def test_fusion_empty_batch():
@@ -103,14 +159,19 @@ def test_bad_inputs_raise():
     with pytest.raises(ValueError, match='rel_bias'):
         neighborhood_attention(
             torch.zeros(1, 1, 1, 2, 2), torch.zeros(1, 1, 1, 2, 2),
-            torch.zeros(1, 1, 1, 2, 2), torch.zeros(1, 4), 3)
+            torch.zeros(1, 1, 1, 2, 2), torch.zeros(1, 9), 3)
+    with pytest.raises(ValueError, match='border'):
+        NeighborhoodFusion(4, 4, 4, embed_dims=4, num_heads=1,
+                           border='clamp')
+    with pytest.raises(ValueError, match='4 source'):
+        fusion(torch.zeros(1, 3, 4, 4), torch.zeros(1, 4, 4, 4))
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason='needs CUDA')
 def test_cuda_matches_cpu():
     gen = torch.Generator().manual_seed(0)
     q, k, v = (torch.randn(1, 2, 4, 6, 7, generator=gen) for _ in range(3))
-    bias = torch.randn(2, 25, generator=gen)
+    bias = torch.randn(2, 9, 9, generator=gen)
     ref = neighborhood_attention(q, k, v, bias, 5)
     out = neighborhood_attention(q.cuda(), k.cuda(), v.cuda(), bias.cuda(), 5)
     assert torch.allclose(out.cpu(), ref, atol=1e-5)

@@ -3,6 +3,8 @@
 The world is 16 m x 16 m x 4 m at 2 m x 2 m x 1 m (8 x 8 x 4 voxels), two
 64 x 32 cameras at stride 16 (2 x 4 features), 8 depth bins.
 """
+import math
+
 import pytest
 import torch
 from mmdet3d.registry import MODELS
@@ -17,6 +19,11 @@ CAM_CHANNELS = 6
 
 
 def _cfg(variant):
+    if variant == 'camera':
+        cfg = _cfg('fusion')
+        for key in ('lidar_encoder', 'fusion', 'loss_distill'):
+            cfg.pop(key)
+        return dict(cfg, variant='camera')
     return dict(
         type='SDGOcc',
         variant=variant,
@@ -57,12 +64,7 @@ def _cfg(variant):
             out_channels=8,
             backend='torch'),
         fusion=dict(
-            type='NeighborhoodFusion',
-            source_channels=8,
-            cross_channels=CAM_CHANNELS,
-            out_channels=CAM_CHANNELS,
-            embed_dims=8,
-            num_heads=2,
+            type='NeighborhoodFusion', embed_dims=8, num_heads=2,
             kernel_size=3),
         bev_encoder=dict(
             type='SDGBEVEncoder',
@@ -74,7 +76,8 @@ def _cfg(variant):
             type='ChannelToHeightHead',
             in_channels=8,
             mid_channels=8),
-        loss_distill=dict(type='FOADDistillLoss', alpha=1.0, beta=0.5),
+        loss_distill=(dict(type='FOADDistillLoss', alpha=1.0, beta=0.5)
+                      if variant == 'kl' else None),
         loss_depth=dict(type='DepthBCELoss', downsample=16, loss_weight=0.05),
         loss_seg=dict(
             type='mmdet.CrossEntropyLoss',
@@ -204,7 +207,15 @@ def test_bad_config_and_inputs_raise():
     with pytest.raises(ValueError, match='loss_distill'):
         MODELS.build(cfg)
     with pytest.raises(ValueError, match='variant'):
-        MODELS.build(_cfg('camera'))
+        MODELS.build(dict(_cfg('fusion'), variant='lidar'))
+    with pytest.raises(ValueError, match='no LiDAR branch'):
+        MODELS.build(dict(_cfg('fusion'), variant='camera'))
+    with pytest.raises(ValueError, match='needs a lidar_encoder'):
+        MODELS.build(_cfg('camera') | dict(variant='fusion'))
+    cfg = _cfg('fusion')
+    cfg['fusion']['source_channels'] = 8  # the LiDAR width: wrong way
+    with pytest.raises(ValueError, match='has source_channels=8'):
+        MODELS.build(cfg)
     model = _model('fusion').train()
     inputs, samples = _batch()
     with pytest.raises(ValueError, match='points'):
@@ -244,3 +255,187 @@ def test_loss_mask_key_ignores_voxels_outside_the_camera_mask():
     torch.manual_seed(0)
     unmasked = MODELS.build(cfg).train()(inputs, samples, mode='loss')
     assert unmasked['loss_focal'].item() > 0.0
+
+
+def _hand_set_fusion(fusion):
+    """Embedding channel 0 (head 0, dim 0 of d = 4) reads channel 0 of the
+    source (query) and of the cross map (key and value); every other
+    weight and the bias table are 0, so head 1 attends uniformly to zero
+    values."""
+    with torch.no_grad():
+        for conv in (fusion.query, fusion.key, fusion.value):
+            conv.weight.zero_()
+            conv.bias.zero_()
+            conv.weight[0, 0] = 1.0
+        fusion.rel_bias.zero_()
+    seen = {}
+    fusion.proj.register_forward_pre_hook(
+        lambda mod, args: seen.update(attended=args[0]))
+    return seen
+
+
+@pytest.mark.parametrize('variant', ['fusion', 'kl'])
+def test_which_bev_is_the_query(variant):
+    """SDG-Fusion: camera queries, LiDAR keys / values; SDG-KL's teacher:
+    the reverse (Sec. 3.5). On a 3 x 3 map with k = 3 every query sees the
+    9 cells (shifted windows); scale 1 / sqrt(4) = 1/2.
+
+    Camera channel 0: 2 ln 8 at the centre, 0 elsewhere. LiDAR channel 0:
+    1 at the corner (0, 0), 0 elsewhere.
+    Camera queries (fusion): the centre's logit to the corner key is
+    (1/2)(2 ln 8)(1) = ln 8, all others 0 -> weight 8 / (8 + 8) = 1/2 on
+    the corner's value 1 -> 0.5; every other query has q = 0 -> uniform
+    -> 1/9.
+    LiDAR queries (kl): the corner's logit to the centre key is ln 8 ->
+    1/2 of the centre's value 2 ln 8 = ln 8 = 2.079; the others average
+    the camera values: 2 ln 8 / 9 = 0.462.
+    """
+    model = _model(variant).eval()
+    seen = _hand_set_fusion(model.fusion)
+    cam = torch.zeros(1, CAM_CHANNELS, 3, 3)
+    cam[0, 0, 1, 1] = 2 * math.log(8.0)
+    lidar = torch.zeros(1, 8, 3, 3)
+    lidar[0, 0, 0, 0] = 1.0
+    with torch.no_grad():
+        model.fuse(dict(bev=lidar), dict(bev=cam))
+    attended = seen['attended'][0, 0]
+    if variant == 'fusion':
+        expected = torch.full((3, 3), 1 / 9)
+        expected[1, 1] = 0.5
+    else:
+        expected = torch.full((3, 3), 2 * math.log(8.0) / 9)
+        expected[0, 0] = math.log(8.0)
+    assert torch.allclose(attended, expected, atol=1e-6)
+    assert torch.equal(seen['attended'][0, 4], torch.zeros(3, 3))
+
+
+def _camera_params(model):
+    """Parameters upstream of the student camera BEV."""
+    parts = ['img_backbone', 'img_neck', 'depth_net', 'camera_bev_conv']
+    return [(f'{part}.{name}', p) for part in parts
+            if hasattr(model, part)
+            for name, p in getattr(model, part).named_parameters()]
+
+
+def test_foad_gradient_on_the_inactive_region_scales_with_beta():
+    """With alpha = 0 only the inactive region IR (LiDAR occupied, camera
+    BEV empty) is distilled: loss = sum_IR rho beta (T - S)^2 / (C N).
+    The student is the BEV after camera_bev_conv, which the camera branch
+    can change on IR, so the camera parameters get a non-zero gradient and
+    doubling beta doubles it. (The pooled BEV is 0 on IR whatever the
+    weights: distilled there, every gradient was exactly 0.)"""
+    from projects.sdg_occ import foad_weights
+    inputs, samples = _batch(num_points=(60, 60))
+    grads = {}
+    for beta in (1.0, 2.0):
+        model = _model('kl').train()
+        model.loss_distill.alpha, model.loss_distill.beta = 0.0, beta
+        loss = model(inputs, samples, mode='loss')['loss_distill']
+        loss.backward()
+        grads[beta] = torch.cat([
+            (p.grad if p.grad is not None else torch.zeros_like(p)).flatten()
+            for _, p in _camera_params(model)
+        ])
+    with torch.no_grad():
+        _, cam = model.extract_camera_bev(inputs, samples)
+        lidar = model.extract_lidar_bev(inputs)
+    weights = foad_weights(lidar['bev_mask'], cam['bev_mask'], 0.0, 1.0)
+    assert (weights > 0).sum() > 0  # IR is not empty
+    assert grads[1.0].abs().sum() > 0
+    assert torch.allclose(grads[2.0], 2 * grads[1.0], rtol=1e-4, atol=1e-9)
+
+
+def test_camera_baseline_predicts_and_trains_without_points():
+    """Table 3's Baseline: no LiDAR encoder, no fusion, plain LSS, no
+    semantic head; predict and loss need only the images. The "+SDG" row
+    still needs the points (LiDAR depth guides its view transform)."""
+    cfg = _cfg('camera')
+    cfg['view_transform'].update(use_sdg=False)
+    cfg['depth_net'].update(seg_channels=0)
+    cfg.pop('loss_seg')
+    torch.manual_seed(0)
+    model = MODELS.build(cfg)
+    assert model.lidar_encoder is None and model.fusion is None
+    inputs, samples = _batch()
+    images_only = dict(imgs=inputs['imgs'])
+    preds = model.eval()(images_only, samples, mode='predict')
+    assert preds[1].pred_occ.shape == (8, 8, 4)
+    losses = model.train()(images_only, samples, mode='loss')
+    assert set(losses) == {'loss_focal', 'loss_depth'}
+    sum(losses.values()).backward()
+    sdg = _model('camera').eval()
+    with pytest.raises(ValueError, match='guided by LiDAR depth'):
+        sdg(images_only, samples, mode='predict')
+    assert sdg(inputs, samples, mode='predict')[0].pred_occ.shape == (8, 8,
+                                                                      4)
+
+
+def test_guidance_depth_uses_the_key_frame_of_each_sample():
+    """Sample 0 merged sweeps (points_time_dim = 4): its car is at 5 m on
+    camera 0's axis now, at 3.5 m 0.45 s ago; camera 0 puts (5, 0, 0) at
+    u = 32, v = 16 -> cell (1, 2) at stride 16. The guidance depth there
+    is 5, the key frame's. Sample 1 has no time column: all points
+    count."""
+    model = _model('fusion').eval()
+    inputs, samples = _batch()
+    car = torch.tensor([[5.0, 0.0, 0.0, 0.5, 0.0], [3.5, 0.0, 0.0, 0.5,
+                                                    0.45]])
+    inputs['points'] = [car, car]
+    samples[0].set_metainfo(dict(points_time_dim=4))
+    with torch.no_grad():
+        _, cam = model.extract_camera_bev(inputs, samples)
+    assert cam['sparse_depth'][0, 1, 2] == 5.0  # sample 0, camera 0
+    assert cam['sparse_depth'][2, 1, 2] == 3.5  # sample 1, camera 0
+
+
+def test_seg_targets_ignore_cells_without_a_labelled_return():
+    """By default a feature cell that no labelled return hits is ignored
+    (255), not class 0: the labels of _batch are 1 (depth <= 4 m) or 2
+    where a point projects, so every target is 1, 2 or 255, and the cells
+    without a point are 255."""
+    model = _model('fusion')
+    inputs, samples = _batch()
+    gt_depth = model.gt_depth(samples, torch.device('cpu'))
+    target = model.seg_targets(samples, gt_depth)
+    assert target.shape == (4, 2, 4)
+    assert set(target.unique().tolist()) <= {1, 2, 255}
+    no_return = gt_depth.view(4, 2, 16, 4, 16).amax((2, 4)) == 0
+    assert no_return.any()
+    assert (target[no_return] == 255).all()
+
+
+def _switched(key_path, value):
+    cfg = _cfg('fusion')
+    node = cfg
+    for key in key_path[:-1]:
+        node = node[key]
+    node[key_path[-1]] = value
+    return cfg
+
+
+@pytest.mark.parametrize('key_path, value', [
+    (('view_transform', 'use_sdg'), False),
+    (('view_transform', 'layer_radius'), 2.0),
+    (('view_transform', 'num_layers'), 2),
+    (('fusion', 'kernel_size'), 5),
+    (('fusion', 'border'), 'mask'),
+])
+def test_ablation_switches_change_the_output(key_path, value):
+    """Each knob of Tables 3-5 changes the BEV the head sees, by more than
+    5 % of its largest value, with the same weights (every weight but a
+    resized bias table copied over). (Through the random head the change
+    shrinks to ~1e-5 of the logits, too close to float noise to test.)"""
+    inputs, samples = _batch(num_points=(80, 80))
+    base = _model('fusion').eval()
+    torch.manual_seed(0)
+    switched = MODELS.build(_switched(key_path, value)).eval()
+    state = switched.state_dict()
+    state.update({
+        k: v
+        for k, v in base.state_dict().items() if v.shape == state[k].shape
+    })
+    switched.load_state_dict(state)
+    with torch.no_grad():
+        out = base.extract_feat(inputs, samples)
+        out_switched = switched.extract_feat(inputs, samples)
+    assert (out - out_switched).abs().max() > 0.05 * out.abs().max()

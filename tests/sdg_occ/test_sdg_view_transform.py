@@ -5,8 +5,8 @@ import pytest
 import torch
 
 from projects.occ_common.testing.occ_inputs import ring_camera_rig
-from projects.sdg_occ import (SDGViewTransform, points_to_depth_maps,
-                              semantic_depth_diffusion)
+from projects.sdg_occ import (SDGViewTransform, key_frame_points,
+                              points_to_depth_maps, semantic_depth_diffusion)
 
 IMG_SHAPE = (16, 32)  # (H, W); features (2, 4): stride 8
 FEAT_SHAPE = (2, 4)
@@ -50,7 +50,10 @@ def _naive_bev(context, prob, ext, lidar2cam, cam2img, vt, num_cams):
 
     A pixel (i, j) sits at u = (j + 0.5) * 8, v = (i + 0.5) * 8;
     at depth d its camera point is ((u - cx) d / f, (v - cy) d / f, d),
-    mapped to the LiDAR frame by inv(lidar2cam).
+    mapped to the LiDAR frame by inv(lidar2cam). A pixel with an extended
+    depth d lifts the 2 l + 1 depths d + k r / l (k = -l .. l) in front of
+    the camera, each with the distribution interpolated at it (clamped to
+    the end bins), rescaled so that they sum to the pixel's mass.
     """
     num_m, chans, feat_h, feat_w = context.shape
     batch = num_m // num_cams
@@ -59,8 +62,8 @@ def _naive_bev(context, prob, ext, lidar2cam, cam2img, vt, num_cams):
     count = 0
     dmin, _, step = DEPTH_BOUND
     num_bins = prob.shape[1]
-    layers = (torch.linspace(-vt.layer_radius, vt.layer_radius,
-                             vt.num_layers).tolist())
+    layers = [k * vt.layer_radius / vt.num_layers
+              for k in range(-vt.num_layers, vt.num_layers + 1)]
     for m in range(num_m):
         cam2lidar = torch.linalg.inv(lidar2cam[m % num_cams])
         fx, cx, cy = (float(cam2img[m % num_cams, 0, 0]),
@@ -73,14 +76,17 @@ def _naive_bev(context, prob, ext, lidar2cam, cam2img, vt, num_cams):
                     cands = []
                     for off in layers:
                         d = float(ext[m, i, j]) + off
-                        pos = (d - dmin) / step
-                        if not 0 <= pos <= num_bins - 1:
+                        if d <= 0:
                             continue
+                        pos = min(max((d - dmin) / step, 0), num_bins - 1)
                         k = min(int(math.floor(pos)), num_bins - 1)
                         t = pos - k
                         p_hi = prob[m, min(k + 1, num_bins - 1), i, j]
                         cands.append((d, (1 - t) * prob[m, k, i, j] +
                                       t * p_hi))
+                    total = sum(float(w) for _, w in cands)
+                    mass = float(prob[m, :, i, j].sum())
+                    cands = [(d, float(w) / total * mass) for d, w in cands]
                 elif vt.fallback == 'lss':
                     cands = [(dmin + k * step, prob[m, k, i, j])
                              for k in range(num_bins)]
@@ -118,7 +124,8 @@ def _inputs(num_cams=2, seed=0):
 
 @pytest.mark.parametrize('fallback', ['lss', 'none'])
 def test_sdg_lift_matches_naive_loop(fallback):
-    """SDG points (r = 1 m, 3 layers) plus the LSS fallback equal the loop.
+    """SDG points (r = 1 m, l = 1: 3 points) plus the LSS fallback equal
+    the loop.
 
     With radius 1 the return at cell (1, 2) of camera 0 spreads to its
     class-1 neighbours (0, 2), (1, 1), (1, 3); column 0 is class 2 and
@@ -128,7 +135,7 @@ def test_sdg_lift_matches_naive_loop(fallback):
     context, prob, seg_logits, points = _inputs()
     vt = SDGViewTransform(PC_RANGE, BEV_SHAPE, DEPTH_BOUND,
                           diffusion_radius=1.0, layer_radius=1.0,
-                          num_layers=3, fallback=fallback)
+                          num_layers=1, fallback=fallback)
     out = vt(context, prob, seg_logits, points, lidar2img[None], IMG_SHAPE)
     sparse = points_to_depth_maps(points, lidar2img[None], IMG_SHAPE,
                                   FEAT_SHAPE)
@@ -143,6 +150,32 @@ def test_sdg_lift_matches_naive_loop(fallback):
     assert int(out['num_sdg_points'] + out['num_lss_points']) == count
     if fallback == 'none':
         assert out['num_lss_points'] == 0
+
+
+def test_guidance_depth_is_the_key_frame_only():
+    """A car at 5 m on camera 0's axis; 0.45 s earlier (time lag 0.45, a
+    merged sweep) its return was at 3.5 m. Column 4 is the time lag: the
+    sparse depth of cell (1, 2) is 5 (the key frame), not 3.5, and so is
+    the diffused depth around it. A sample without a time column (None)
+    uses every point, and a points_time_dims entry past the columns is
+    refused."""
+    _, _, lidar2img = _rig(2)
+    context, prob, seg_logits, _ = _inputs()
+    pts = torch.tensor([[5.0, 0.0, 0.0, 1.0, 0.0], [3.5, 0.0, 0.0, 1.0,
+                                                    0.45]])
+    vt = SDGViewTransform(PC_RANGE, BEV_SHAPE, DEPTH_BOUND,
+                          diffusion_radius=1.0)
+    out = vt(context, prob, seg_logits, [pts], lidar2img[None], IMG_SHAPE,
+             points_time_dims=[4])
+    assert out['sparse_depth'][0, 1, 2] == 5.0
+    assert out['ext_depth'][0, 1, 3] == 5.0
+    assert (out['sparse_depth'] > 0).sum() == 1
+    out = vt(context, prob, seg_logits, [pts], lidar2img[None], IMG_SHAPE,
+             points_time_dims=[None])
+    assert out['sparse_depth'][0, 1, 2] == 3.5
+    assert key_frame_points([pts], [4])[0].tolist() == [pts[0].tolist()]
+    with pytest.raises(ValueError, match='no time column 5'):
+        key_frame_points([pts], [5])
 
 
 def test_plain_lss_baseline_matches_naive_loop_and_caches():
@@ -200,6 +233,8 @@ def test_bad_inputs_raise():
            IMG_SHAPE)
     with pytest.raises(ValueError, match='seg_logits'):
         vt(context, prob, None, points, lidar2img[None], IMG_SHAPE)
+    with pytest.raises(ValueError, match='needs the points'):
+        vt(context, prob, seg_logits, None, lidar2img[None], IMG_SHAPE)
     with pytest.raises(ValueError, match='point clouds'):
         points_to_depth_maps(points * 2, lidar2img[None], IMG_SHAPE,
                              FEAT_SHAPE)

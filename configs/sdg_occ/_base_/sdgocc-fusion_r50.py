@@ -1,16 +1,18 @@
 # SDG-Fusion (SDG-OCC, Duan et al., CVPR 2025) without a dataset: ResNet50
 # + FPN at 1/16 of the images, multi-task DepthNet, SDG view transform,
-# SPVCNN LiDAR BEV, LiDAR-dominant neighbourhood-attention fusion, BEV
-# encoder and FlashOcc's channel-to-height head; AdamW 1e-4 with gradient
-# clipping. A config adds a dataset base and sets the coupled values on
-# `model` from it (point_cloud_range, voxel_size, num_classes, empty_index)
-# and the depth bins that cover its grid: the detector hands them to the
-# modules that need them. `kl_model` turns it into SDG-KL.
+# SPVCNN LiDAR BEV, neighbourhood-attention fusion with camera queries and
+# LiDAR keys / values, BEV encoder and FlashOcc's channel-to-height head;
+# AdamW 1e-4 with gradient clipping. A config adds a dataset base and sets
+# the coupled values on `model` from it (point_cloud_range, voxel_size,
+# num_classes, empty_index) and the depth bins that cover its grid: the
+# detector hands them to the modules that need them. `kl_model` turns it
+# into SDG-KL.
 _base_ = ['../../_base_/schedules/adamw-24e.py']
 
 _img_stride = 16  # image features at 1/16 (paper)
-# 2D semantic classes: 0 background (cells no labelled return hits), then
-# the 16 lidarseg classes as projected by PointsToSemanticMaps.
+# 2D semantic classes: the 16 lidarseg classes 1..16 as projected by
+# PointsToSemanticMaps; 0 is eq. 2's "no class" (never a target: cells no
+# labelled return hits are ignored).
 _num_seg_classes = 17
 _point_dims = 5  # x, y, z, intensity, time lag of the merged sweeps
 # Channel widths (not fixed by the paper): BEVDet-Occ / FlashOcc's 64-channel
@@ -63,8 +65,8 @@ model = dict(
         # Semantic diffusion radius in 1/16 feature pixels (not fixed by the
         # paper): 2 cells = 32 image pixels, about one object width at 20 m.
         diffusion_radius=2.0,
-        # Bilinear incremental discretization: r = 1 m, 8 layers (paper,
-        # Table 4).
+        # Bidirectional linear incremental discretization: r = 1 m, l = 8
+        # (paper, Table 4): 2 l + 1 = 17 virtual points 0.125 m apart.
         layer_radius=1.0,
         num_layers=8,
         fallback='lss',
@@ -76,12 +78,14 @@ model = dict(
         # BEV cell.
         voxel_size=[0.1, 0.1, 0.1],
         stage_strides=(2, 2),
-        out_channels=_lidar_channels),
+        out_channels=_lidar_channels,
+        # "Voxelization and normalization" (Sec. 3.5): each point's offsets
+        # to its voxel's mean and centre, as in the authors' code.
+        point_offsets=True),
     fusion=dict(
         type='NeighborhoodFusion',
-        source_channels=_lidar_channels,  # LiDAR-dominant: LiDAR queries
-        cross_channels=_cam_channels,
-        out_channels=_cam_channels,  # same width as the student camera BEV
+        # The widths come from the detector: camera BEV queries, LiDAR BEV
+        # keys / values for SDG-Fusion (swapped for SDG-KL's teacher).
         # Attention width (not given by the paper): the camera BEV's 64
         # channels in 4 heads of 16, NAT's head width.
         embed_dims=64,
@@ -115,12 +119,13 @@ model = dict(
         type='mmdet.CrossEntropyLoss',
         ignore_index=255,
         avg_non_ignore=True,
-        loss_weight=0.5),  # not fixed by the paper; BEVDet-style aux weight
-    seg_empty_label=0)
+        loss_weight=0.5))  # not fixed by the paper; BEVDet-style aux weight
 
-# SDG-KL: SDG-Fusion's network trained with the fusion as a teacher and FOAD
-# distillation into the camera BEV; inference skips the SPVCNN branch and
-# the fusion. The *sdgocc-kl_* configs merge it into `model`.
+# SDG-KL: SDG-Fusion's network trained with a LiDAR-dominant fusion (LiDAR
+# queries, camera keys / values; the detector swaps the widths) as a
+# teacher and FOAD distillation into the camera BEV; inference skips the
+# SPVCNN branch and the fusion. The *sdgocc-kl_* configs merge it into
+# `model`.
 kl_model = dict(
     variant='kl',
     # alpha, beta and the loss weight are not fixed by the paper: the

@@ -1,5 +1,5 @@
-# SDG-OCC Table 4: virtual points spread over [d - 1, d + 1] m in
-# 8 layers (the paper's choice, = the main config).
+# SDG-OCC Table 4: r = 1 m, l = 8: 17 virtual points per pixel, 1/8 m
+# apart over [d - 1, d + 1] (the paper's choice, = the main config).
 _base_ = ['../sdgocc-fusion_r50_4xb2-24e_occ3d-nus.py']
 
 model = dict(view_transform=dict(layer_radius=1.0, num_layers=8))

@@ -18,8 +18,11 @@ OCC_FIELDS = dict(
     gt_seg_2d=torch.uint8)
 
 #: Meta keys packed by default: identity, weather, geometry of every view
-#: and of the working frame, and what the loading removed or chose (the
-#: ego returns, the source of the 2-D semantic targets).
+#: and of the working frame, what the loading removed or chose (the ego
+#: returns, the source of the 2-D semantic targets), and which points column
+#: is the sweeps' time lag (``points_time_dim``: models that need the key
+#: frame alone, such as SDG-OCC's depth guidance, select it as
+#: ``PointsToDepthMaps`` does).
 OCC_META_KEYS = ('sample_idx', 'token', 'scene_token', 'scene_name',
                  'is_rainy', 'is_night', 'timestamp', 'lidar_path',
                  'img_path', 'cam_names', 'num_views', 'ori_shape',
@@ -28,7 +31,7 @@ OCC_META_KEYS = ('sample_idx', 'token', 'scene_token', 'scene_name',
                  'lidar2ego', 'ori_lidar2ego', 'ego2global', 'occ_format',
                  'coord_frame', 'occ_pc_range', 'occ_voxel_size',
                  'num_pts_feats', 'img_aug_params', 'bda_params',
-                 'num_ego_points', 'seg_2d_source')
+                 'num_ego_points', 'seg_2d_source', 'points_time_dim')
 
 
 @TRANSFORMS.register_module()

@@ -20,8 +20,8 @@ from mmdet3d.utils import register_all_modules
 from mmengine.config import Config
 
 import projects.occ_common  # noqa: F401  (registers)
-from projects.occ_common.datasets.nuscenes_classes import LIDARSEG_RAW_TO_OCC16
 from projects.occ_common.datasets.synthetic import world_from_dict
+from projects.occ_common.testing.camera_classes import rendered_classes
 from projects.occ_common.testing.tiny_world import make_tiny_world
 
 register_all_modules(init_default_scope=True)
@@ -75,16 +75,6 @@ LOAD_KEY_FRAME = [
          use_dim=5),
     dict(type='LoadLidarSegLabels'),
 ]
-
-
-def rendered_classes(root, img_path):
-    """Occupancy class (0..16, 0 = sky / ignored) rendered at each pixel."""
-    cam = osp.basename(osp.dirname(img_path))
-    stem = osp.splitext(osp.basename(img_path))[0]
-    raw = cv2.imread(
-        osp.join(root, 'synthetic_gt', 'cam_labels', cam, stem + '.png'),
-        cv2.IMREAD_UNCHANGED)
-    return LIDARSEG_RAW_TO_OCC16[raw]
 
 
 def test_info_files(root):

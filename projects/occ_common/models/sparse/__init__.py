@@ -8,8 +8,8 @@ between backends.
 from .backend import (BACKENDS, resolve_backend, spconv_available,
                       spconv_supports_cuda)
 from .dense import scatter_bev, to_dense, to_dense_bev
-from .point_voxel import (coord_index, point_to_voxel, scatter_mean,
-                          trilinear_devoxelize, voxel_rows)
+from .point_voxel import (coord_index, point_to_voxel, point_voxel_offsets,
+                          scatter_mean, trilinear_devoxelize, voxel_rows)
 from .rulebook import (CoordIndex, Rulebook, conv_output_shape, delinearize,
                        linearize, strided_rulebook, submanifold_rulebook)
 from .sparse_blocks import SparseConvBNReLU, SparseResBlock
@@ -26,8 +26,9 @@ __all__ = [
     'SparseBatchNorm', 'SparseConv', 'SparseConvBNReLU', 'SparseConvBase',
     'SparseInverseConv', 'SparseReLU', 'SparseResBlock', 'SparseTensor',
     'SubMConv', 'batch_norm_rows', 'conv_output_shape', 'coord_index',
-    'delinearize', 'linearize', 'point_to_voxel', 'resolve_backend',
-    'rulebook_conv', 'scatter_bev', 'scatter_mean', 'spconv_available',
+    'delinearize', 'linearize', 'point_to_voxel', 'point_voxel_offsets',
+    'resolve_backend', 'rulebook_conv', 'scatter_bev', 'scatter_mean',
+    'spconv_available',
     'spconv_supports_cuda', 'strided_rulebook', 'submanifold_rulebook',
     'to_dense', 'to_dense_bev', 'trilinear_devoxelize', 'voxel_rows'
 ]

@@ -8,7 +8,7 @@ centres. Both work on any device and are differentiable with respect to
 the features.
 """
 import itertools
-from typing import Optional
+from typing import Optional, Sequence
 
 import torch
 import torch.nn.functional as F
@@ -33,6 +33,36 @@ def scatter_mean(src: Tensor, index: Tensor, num_rows: int) -> Tensor:
     total = src.new_zeros(num_rows, src.shape[1]).index_add(0, index, src)
     counts = torch.bincount(index, minlength=num_rows).clamp(min=1)
     return total / counts.to(src.dtype)[:, None]
+
+
+def point_voxel_offsets(xyz: Tensor, rows: Tensor, num_voxels: int,
+                        voxel_zyx: Tensor, voxel_size: Sequence[float],
+                        range_min: Sequence[float]) -> Tensor:
+    """Offset of every point to the mean of its voxel and to its centre.
+
+    The normalised point features of SPVCNN-style LiDAR branches (and of
+    PointPillars' voxel feature encoder): ``p - mean_{q in v(p)} q`` and
+    ``p - c(v(p))`` with the voxel centre ``c(v) = range_min + (v + 0.5) *
+    voxel_size``, in metres.
+
+    Args:
+        xyz (Tensor): Point coordinates (x, y, z), metres. Shape (P, 3).
+        rows (Tensor): Voxel of each point, in [0, num_voxels). Shape (P,).
+        num_voxels (int): Number of voxels.
+        voxel_zyx (Tensor): Integer voxel index of each point, ordered
+            (z, y, x). Shape (P, 3).
+        voxel_size (Sequence[float]): (x, y, z) voxel edge, metres.
+        range_min (Sequence[float]): (x, y, z) of the grid's corner.
+
+    Returns:
+        Tensor: ``(dx, dy, dz)`` to the mean, then to the centre.
+        Shape (P, 6).
+    """
+    mean = scatter_mean(xyz, rows, num_voxels)[rows]
+    size = xyz.new_tensor(voxel_size)
+    centre = xyz.new_tensor(range_min) + (voxel_zyx.flip(1).to(xyz.dtype) +
+                                          0.5) * size
+    return torch.cat([xyz - mean, xyz - centre], dim=1)
 
 
 def coord_index(x: SparseTensor) -> CoordIndex:

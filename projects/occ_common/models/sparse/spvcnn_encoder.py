@@ -17,8 +17,8 @@ from torch import Tensor, nn
 
 from .backend import check_backend
 from .dense import scatter_bev, to_dense_bev
-from .point_voxel import (coord_index, scatter_mean, trilinear_devoxelize,
-                          voxel_rows)
+from .point_voxel import (coord_index, point_voxel_offsets, scatter_mean,
+                          trilinear_devoxelize, voxel_rows)
 from .rulebook import delinearize, linearize
 from .sparse_blocks import SparseConvBNReLU, SparseResBlock
 from .sparse_norm_act import LinearBNReLU
@@ -35,7 +35,14 @@ class SPVCNNEncoder(BaseModule):
 
     1. Voxelise: points inside ``point_cloud_range`` fall in voxels of
        ``voxel_size``; a voxel's input feature is the mean of its points'
-       first ``in_channels`` values.
+       first ``in_channels`` values. With ``point_offsets`` each point
+       first gets its offsets to its voxel's mean and centre
+       (:func:`point_voxel_offsets`, the "voxelization and normalization"
+       of SDG-OCC Sec. 3.5, as in the authors' code) and a point MLP
+       (Linear-BN-ReLU, Linear) to ``base_channels``; the voxel feature is
+       the mean of these. (The mean of the offsets to the mean is 0, so
+       without a per-point layer before the mean they would carry
+       nothing.)
     2. Stem: two 3x3x3 submanifold conv-BN-ReLU; the point branch starts as
        the stem's features interpolated at every point.
     3. Stages: a kernel = stride sparse conv down-samples (when the stride
@@ -74,6 +81,8 @@ class SPVCNNEncoder(BaseModule):
         out_channels (int): BEV channels. Defaults to 128.
         bev_reduce (str): ``'max'``, ``'mean'`` or ``'concat'``.
             Defaults to ``'max'``.
+        point_offsets (bool): Add the per-point offsets to the voxel mean
+            and centre and the point MLP (step 1). Defaults to False.
         backend (str): Sparse conv backend, ``'auto'``, ``'spconv'`` or
             ``'torch'``. Defaults to ``'auto'``.
         init_cfg (dict, optional): mmengine initialisation config.
@@ -92,6 +101,7 @@ class SPVCNNEncoder(BaseModule):
                  bev_shape: Sequence[int] = (200, 200),
                  out_channels: int = 128,
                  bev_reduce: str = 'max',
+                 point_offsets: bool = False,
                  backend: str = 'auto',
                  init_cfg: Optional[Union[dict, List[dict]]] = None) -> None:
         super().__init__(init_cfg=init_cfg)
@@ -112,8 +122,15 @@ class SPVCNNEncoder(BaseModule):
             for a, n in ((0, self.bev_shape[1]), (1, self.bev_shape[0])))
         self._check_bev_resolution()
 
+        self.point_offsets = point_offsets
+        stem_in = in_channels
+        if point_offsets:
+            self.point_input = nn.Sequential(
+                LinearBNReLU(in_channels + 6, base_channels),
+                nn.Linear(base_channels, base_channels))
+            stem_in = base_channels
         self.stem = nn.Sequential(
-            SparseConvBNReLU('subm', in_channels, base_channels, kernel_size=3,
+            SparseConvBNReLU('subm', stem_in, base_channels, kernel_size=3,
                              indice_key='subm0', backend=backend),
             SparseConvBNReLU('subm', base_channels, base_channels,
                              kernel_size=3, indice_key='subm0',
@@ -320,6 +337,11 @@ class SPVCNNEncoder(BaseModule):
         batch, position, features, fine, rows = (
             t[order] for t in (batch, position, features, fine, rows))
         coords = delinearize(keys, self.sparse_shape)
+        if self.point_offsets:
+            offsets = point_voxel_offsets(features[:, :3], rows, keys.numel(),
+                                          fine, self.voxel_size,
+                                          self.point_cloud_range[:3])
+            features = self.point_input(torch.cat([features, offsets], 1))
         x = SparseTensor(
             scatter_mean(features, rows, keys.numel()),
             coords,

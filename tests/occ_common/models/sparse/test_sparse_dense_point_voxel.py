@@ -6,6 +6,7 @@ import torch
 from projects.occ_common.models.sparse import (LinearBNReLU, SparseBatchNorm,
                                                SparseReLU, SparseResBlock,
                                                SparseTensor, point_to_voxel,
+                                               point_voxel_offsets,
                                                scatter_bev, scatter_mean,
                                                to_dense, to_dense_bev,
                                                trilinear_devoxelize,
@@ -75,6 +76,26 @@ def test_scatter_mean_by_hand():
     assert src.grad[:, 0].tolist() == [0.5, 0.5, 1.]
     assert scatter_mean(src[:0], torch.zeros(0, dtype=torch.long),
                         2).tolist() == [[0.], [0.]]
+
+
+def test_point_voxel_offsets_by_hand():
+    """Voxels of 0.5 x 1 x 2 m (x, y, z) from the corner (-1, 0, 1).
+
+    p0 (-0.9, 0.2, 1.5) and p1 (-0.6, 0.9, 2.5) share voxel (z, y, x) =
+    (0, 0, 0), centre (-1 + 0.25, 0.5, 1 + 1) = (-0.75, 0.5, 2.0), mean
+    (-0.75, 0.55, 2.0): to the mean p0 (-0.15, -0.35, -0.5) and p1 (0.15,
+    0.35, 0.5); to the centre p0 (-0.15, -0.3, -0.5), p1 (0.15, 0.4, 0.5).
+    p2 (0.3, 2.5, 4.0) is alone in voxel (1, 2, 2), centre (-1 + 1.25,
+    2.5, 1 + 3) = (0.25, 2.5, 4.0): (0, 0, 0) and (0.05, 0, 0).
+    """
+    xyz = torch.tensor([[-0.9, 0.2, 1.5], [-0.6, 0.9, 2.5], [0.3, 2.5, 4.0]])
+    zyx = torch.tensor([[0, 0, 0], [0, 0, 0], [1, 2, 2]])
+    out = point_voxel_offsets(xyz, torch.tensor([0, 0, 1]), 2, zyx,
+                              (0.5, 1.0, 2.0), (-1.0, 0.0, 1.0))
+    expected = torch.tensor([[-0.15, -0.35, -0.5, -0.15, -0.3, -0.5],
+                             [0.15, 0.35, 0.5, 0.15, 0.4, 0.5],
+                             [0.0, 0.0, 0.0, 0.05, 0.0, 0.0]])
+    torch.testing.assert_close(out, expected)
 
 
 def test_voxel_rows_and_point_to_voxel():

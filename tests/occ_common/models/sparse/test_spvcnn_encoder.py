@@ -90,6 +90,45 @@ def test_bev_mask_by_hand():
     assert not bool((active & ~expected).any())
 
 
+def test_point_offsets_are_the_point_inputs():
+    """point_offsets=True: each point enters the point MLP as its 4 values
+    then its offsets to the voxel mean and centre (1 m voxels from 0).
+
+    (0.2, 0.4, 0.6, i=1) and (0.6, 0.8, 0.2, i=3) share voxel (0, 0, 0),
+    centre (0.5, 0.5, 0.5), mean (0.4, 0.6, 0.4): offsets to the mean
+    (-0.2, -0.2, 0.2) and (0.2, 0.2, -0.2), to the centre (-0.3, -0.1,
+    0.1) and (0.1, 0.3, -0.3). (3.5, 2.5, 1.5, i=2) is alone at its
+    voxel's centre: all six offsets 0. The stem then gets the mean of the
+    MLP outputs per voxel (without the option, the mean of the raw 4
+    values)."""
+    enc = _encoder(point_offsets=True).eval()
+    cloud = torch.tensor([[0.2, 0.4, 0.6, 1.0], [0.6, 0.8, 0.2, 3.0],
+                          [3.5, 2.5, 1.5, 2.0]])
+    seen = {}
+    enc.point_input.register_forward_hook(
+        lambda mod, args, out: seen.update(points=args[0], mlp=out))
+    enc.stem[0].register_forward_pre_hook(
+        lambda mod, args: seen.update(stem=args[0].features))
+    enc([cloud])
+    rows = sorted(seen['points'].tolist())
+    expected = sorted([[0.2, 0.4, 0.6, 1.0, -0.2, -0.2, 0.2, -0.3, -0.1, 0.1],
+                       [0.6, 0.8, 0.2, 3.0, 0.2, 0.2, -0.2, 0.1, 0.3, -0.3],
+                       [3.5, 2.5, 1.5, 2.0, 0, 0, 0, 0, 0, 0]])
+    torch.testing.assert_close(torch.tensor(rows), torch.tensor(expected))
+    # Rows are grouped by voxel: the two points of voxel 0 come first.
+    mlp = seen['mlp']
+    torch.testing.assert_close(seen['stem'],
+                               torch.stack([mlp[:2].mean(0), mlp[2]]))
+    plain = _encoder().eval()
+    plain.stem[0].register_forward_pre_hook(
+        lambda mod, args: seen.update(plain=args[0].features))
+    plain([cloud])
+    torch.testing.assert_close(
+        seen['plain'], torch.stack([cloud[:2].mean(0), cloud[2]]))
+    out = _encoder(point_offsets=True)([torch.zeros(0, 4)])
+    assert out['bev'].abs().sum().item() == 0.
+
+
 def test_empty_point_cloud():
     """No points at all: zero BEV, all-False mask, and backward still
     reaches every parameter (with zero gradient)."""
