@@ -81,6 +81,12 @@ def parse_args(argv=None):
     view.add_argument('--azimuth', type=float, default=-150.0)
     view.add_argument('--elevation', type=float, default=40.0)
     view.add_argument(
+        '--forward',
+        choices=['+x', '+y', '-x', '-y'],
+        help='grid direction ahead of the car, drawn up in the top-down '
+        "views (default: the sample's lidar2ego, else +x for occ3d and +y "
+        "for surroundocc, whose grids are in nuScenes' LiDAR frame)")
+    view.add_argument(
         '--view-size', type=int, nargs=2, default=(360, 480),
         help='(H, W) of the 3D views')
     args = parser.parse_args(argv)
@@ -219,6 +225,11 @@ def main(argv=None) -> Optional[str]:
         name = osp.splitext(osp.basename(args.pred or args.gt))[0]
         sample['sample_idx'] = name
     convention = args.convention or labels.get('convention', 'surroundocc')
+    if isinstance(sample, dict):
+        # Saved grids carry no lidar2ego: their convention's frame says
+        # which way is ahead.
+        sample.setdefault('occ_format', convention)
+    view = {} if args.forward is None else dict(forward=args.forward)
     default_names, empty_label = convention_classes(convention)
     class_names = (args.class_names or labels.get('class_names')
                    or default_names)
@@ -238,7 +249,8 @@ def main(argv=None) -> Optional[str]:
         img=img,
         azimuth=args.azimuth,
         elevation=args.elevation,
-        view_size=tuple(args.view_size))
+        view_size=tuple(args.view_size),
+        **view)
     save_png(picture, args.out)
     print(f'wrote {args.out}')
     return args.out
