@@ -9,8 +9,17 @@ and refuses a checkpoint with non-finite weights, or whose keys or shapes
 differ from the model's (unless ``--allow-key-mismatch``);
 ``--cfg-options`` and the config's top-level keys are checked by
 ``config_checks``.
+
+``--format-only`` (the ``format_only`` of mmdet3d's metrics): the metric
+writes the predictions instead of scoring them (Occ3D ``<token>.npz`` and
+their zip, or SurroundOcc ``.npy`` rows; see
+``projects/occ_common/evaluation/occupancy_export.py``) to
+``--submission-prefix`` (default ``<work_dir>/submission``), and the test
+pipeline reads no labels, so a split without them (``v1.0-test``) runs.
+``--submission-prefix`` alone writes the same files and scores too.
 """
 import argparse
+import copy
 import os
 import os.path as osp
 
@@ -58,6 +67,15 @@ def parse_args(argv=None):
         help='job launcher')
     parser.add_argument('--tta', action='store_true', help='test time aug')
     parser.add_argument(
+        '--format-only',
+        action='store_true',
+        help='write the predictions in the benchmark layout instead of '
+        'scoring them; runs on a split without labels (v1.0-test)')
+    parser.add_argument(
+        '--submission-prefix',
+        help='folder of the prediction files (default with --format-only: '
+        '<work_dir>/submission)')
+    parser.add_argument(
         '--allow-key-mismatch',
         action='store_true',
         help='evaluate a checkpoint whose keys or shapes differ from the '
@@ -87,6 +105,43 @@ def trigger_visualization_hook(cfg: Config, args) -> Config:
     return cfg
 
 
+#: Test-pipeline steps that only read labels or make training targets from
+#: them; --format-only drops them (nothing is scored, no prediction uses
+#: them, and the test split has no lidarseg).
+LABEL_ONLY_STEPS = ('LoadLidarSegLabels', 'PointsToSemanticMaps')
+
+
+def set_format_only(cfg: Config, args) -> None:
+    """Point the metrics at the submission folder; with ``--format-only``
+    also stop them scoring and the test pipeline reading labels."""
+    prefix = args.submission_prefix
+    if prefix is None and args.format_only:
+        prefix = osp.join(cfg.work_dir, 'submission')
+    if prefix is None:
+        return
+    # The configs share one evaluator / dataloader dict between val and
+    # test: change test's own copy.
+    evaluator = copy.deepcopy(cfg.test_evaluator)
+    metrics = evaluator if isinstance(evaluator, list) else [evaluator]
+    for metric in metrics:
+        metric['submission_prefix'] = prefix
+        if args.format_only:
+            metric['format_only'] = True
+    cfg.test_evaluator = evaluator
+    if not args.format_only:
+        return
+    cfg.test_dataloader = copy.deepcopy(cfg.test_dataloader)
+    dataset = cfg.test_dataloader.dataset
+    while 'pipeline' not in dataset and 'dataset' in dataset:
+        dataset = dataset.dataset  # wrappers
+    dataset.pipeline = [
+        dict(step, allow_unlabelled=True)
+        if step.get('type') == 'LoadOccupancyGT' else step
+        for step in dataset.pipeline
+        if step.get('type') not in LABEL_ONLY_STEPS
+    ]
+
+
 def build_cfg(args) -> Config:
     """Load the config and apply the command-line overrides."""
     cfg = Config.fromfile(args.config)
@@ -100,6 +155,7 @@ def build_cfg(args) -> Config:
                                 osp.splitext(osp.basename(args.config))[0])
 
     cfg.load_from = args.checkpoint
+    set_format_only(cfg, args)
     # Registered by projects.occ_common (the config's custom_imports).
     cfg.custom_hooks = list(cfg.get('custom_hooks', None) or []) + [
         dict(

@@ -9,9 +9,13 @@ Two sources:
   them; ``--save-pred F.npz`` also stores the grids);
 - saved grids: ``--pred F`` and / or ``--gt F``, each an ``.npz`` (keys
   ``pred_occ`` / ``gt_occ`` / ``mask_camera`` as ``--save-pred`` writes
-  them, or Occ3D's ``labels.npz`` with ``semantics``) or an ``.npy``
-  (a dense (X, Y, Z) grid, or SurroundOcc's sparse (N, 4) ``x, y, z, label``
-  rows, which need ``--occ-shape``).
+  them; Occ3D's ``labels.npz`` with ``semantics`` and ``mask_camera``; an
+  Occ3D submission file of ``tools/test.py --format-only`` or the
+  challenge's ``<token>.npz``; FlashOcc's ``pred.npz`` with ``pred``, whose
+  pickled ``gt`` is never loaded; these imply ``--convention occ3d``) or an
+  ``.npy`` (a dense (X, Y, Z) grid, or SurroundOcc's sparse (N, 4) ``x, y,
+  z, label`` rows of a label or a ``--format-only`` prediction, which need
+  ``--occ-shape``).
 
 Examples::
 
@@ -81,6 +85,12 @@ def parse_args(argv=None):
     view.add_argument('--azimuth', type=float, default=-150.0)
     view.add_argument('--elevation', type=float, default=40.0)
     view.add_argument(
+        '--forward',
+        choices=['+x', '+y', '-x', '-y'],
+        help='grid direction ahead of the car, drawn up in the top-down '
+        "views (default: the sample's lidar2ego, else +x for occ3d and +y "
+        "for surroundocc, whose grids are in nuScenes' LiDAR frame)")
+    view.add_argument(
         '--view-size', type=int, nargs=2, default=(360, 480),
         help='(H, W) of the 3D views')
     args = parser.parse_args(argv)
@@ -92,9 +102,20 @@ def parse_args(argv=None):
     return args
 
 
+#: Keys of the one grid of a foreign ``.npz``, in the order they are looked
+#: for, and the convention each implies: Occ3D's ``labels.npz``
+#: (``semantics``), an Occ3D submission file (``semantics`` and / or the
+#: unnamed ``arr_0``), FlashOcc's ``pred.npz`` (``pred``).
+FOREIGN_KEYS = {'semantics': 'occ3d', 'arr_0': 'occ3d', 'pred': 'occ3d'}
+
+
 def load_grid(path: str, key: str,
               occ_shape: Sequence[int]) -> Dict[str, np.ndarray]:
     """Read a saved grid (see the module docstring).
+
+    Nothing pickled is ever loaded: FlashOcc's ``pred.npz`` also stores its
+    GT as a pickled object (``gt``), which is skipped; give the Occ3D
+    ``labels.npz`` as ``--gt`` instead.
 
     Args:
         path (str): ``.npz`` or ``.npy`` file.
@@ -105,27 +126,45 @@ def load_grid(path: str, key: str,
 
     Returns:
         dict[str, np.ndarray]: ``key`` and whatever else the file holds of
-        ``pred_occ``, ``gt_occ`` and ``mask_camera``.
+        ``pred_occ``, ``gt_occ`` and ``mask_camera``; ``'convention'``
+        (a str) when the file's layout implies one.
 
     Raises:
         ValueError: If the file holds no usable grid.
     """
     if path.endswith('.npz'):
-        with np.load(path) as data:
-            found = {k: data[k] for k in data.files}
-        if 'semantics' in found:  # Occ3D's labels.npz
-            found.setdefault('gt_occ', found.pop('semantics'))
+        with np.load(path, allow_pickle=False) as data:
+            names = list(data.files)
+            wanted = ['pred_occ', 'gt_occ', 'mask_camera'] + list(
+                FOREIGN_KEYS)
+            found = {}
+            for name in wanted:
+                if name in names:
+                    try:
+                        found[name] = data[name]
+                    except ValueError:  # a pickled object: never loaded
+                        continue
         grids = {
             k: found[k]
             for k in ('pred_occ', 'gt_occ', 'mask_camera') if k in found
         }
         if key not in grids:
-            raise ValueError(f'{path}: expected an array {key!r} (or Occ3D '
-                             f"'semantics'), found {sorted(found)}.")
+            # FlashOcc's 'pred' is a prediction, never a GT.
+            foreign = [
+                k for k in FOREIGN_KEYS
+                if k in found and (k != 'pred' or key == 'pred_occ')
+            ]
+            if not foreign:
+                raise ValueError(
+                    f'{path}: expected an array {key!r}, Occ3D '
+                    "'semantics' / 'arr_0' or (a prediction) FlashOcc "
+                    f"'pred', found {names}.")
+            grids[key] = found[foreign[0]]
+            grids['convention'] = FOREIGN_KEYS[foreign[0]]
         return grids
     if not path.endswith('.npy'):
         raise ValueError(f'{path}: expected a .npz or .npy file.')
-    array = np.load(path)
+    array = np.load(path, allow_pickle=False)
     if array.ndim == 2 and array.shape[1] == 4:
         return {key: sparse_to_dense(array, occ_shape, path)}
     if array.ndim != 3:
@@ -218,7 +257,14 @@ def main(argv=None) -> Optional[str]:
             sample.update(load_grid(args.pred, 'pred_occ', args.occ_shape))
         name = osp.splitext(osp.basename(args.pred or args.gt))[0]
         sample['sample_idx'] = name
+        if 'convention' in sample:
+            labels.setdefault('convention', sample.pop('convention'))
     convention = args.convention or labels.get('convention', 'surroundocc')
+    if isinstance(sample, dict):
+        # Saved grids carry no lidar2ego: their convention's frame says
+        # which way is ahead.
+        sample.setdefault('occ_format', convention)
+    view = {} if args.forward is None else dict(forward=args.forward)
     default_names, empty_label = convention_classes(convention)
     class_names = (args.class_names or labels.get('class_names')
                    or default_names)
@@ -238,7 +284,8 @@ def main(argv=None) -> Optional[str]:
         img=img,
         azimuth=args.azimuth,
         elevation=args.elevation,
-        view_size=tuple(args.view_size))
+        view_size=tuple(args.view_size),
+        **view)
     save_png(picture, args.out)
     print(f'wrote {args.out}')
     return args.out

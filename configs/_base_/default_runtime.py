@@ -32,6 +32,14 @@ custom_hooks = [
     dict(type='AugmentationSeedHook'),
 ]
 
+# Where the Runner's pictures and scalars go; mmdet3d's
+# tools/misc/browse_dataset.py draws samples through this visualizer too.
+# TensorBoard (needs `pip install tensorboard`): add
+# dict(type='TensorboardVisBackend') to vis_backends (README, "Training").
+vis_backends = [dict(type='LocalVisBackend')]
+# No `name`: the Runner names each run's visualizer after the run.
+visualizer = dict(type='OccLocalVisualizer', vis_backends=vis_backends)
+
 env_cfg = dict(
     cudnn_benchmark=False,
     mp_cfg=dict(mp_start_method='fork', opencv_num_threads=0),

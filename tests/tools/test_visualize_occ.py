@@ -63,9 +63,60 @@ def test_sparse_surroundocc_and_occ3d_labels(tmp_path):
                      'occ3d', '--out', str(tmp_path / 'gt.png'),
                      '--view-size', '40', '60'])
     assert osp.isfile(out)
+    np.savez(tmp_path / 'other.npz', logits=semantics)
     with pytest.raises(ValueError, match="expected an array 'pred_occ'"):
-        tool.main(['--pred', str(tmp_path / 'labels.npz'), '--out',
+        tool.main(['--pred', str(tmp_path / 'other.npz'), '--out',
                    str(tmp_path / 'x.png')])
+
+
+class _RunsCode:
+    """Unpickling this would create ``marker``."""
+
+    def __init__(self, marker):
+        self.marker = marker
+
+    def __reduce__(self):
+        return (open, (self.marker, 'w'))
+
+
+def test_occ3d_submission_and_flashocc_files(tmp_path):
+    """An Occ3D submission file (tools/test.py --format-only: 'semantics'
+    and 'arr_0') and FlashOcc's pred.npz ('pred', with its GT as a pickled
+    object) are read as predictions with the Occ3D convention; the pickle
+    is never loaded (the object would create a file), and a FlashOcc file
+    is no GT."""
+    from projects.occ_common.evaluation.occupancy_export import \
+        write_occ3d_prediction
+    tool = load_tool('visualize_occ.py')
+    semantics = np.full((8, 8, 4), 17, dtype=np.uint8)
+    semantics[:, :, 0] = 11
+    pred = semantics.copy()
+    pred[0, 0, 0] = 17
+    sub = write_occ3d_prediction(str(tmp_path / 'sub'), 'tok', pred)
+    np.savez(tmp_path / 'labels.npz', semantics=semantics,
+             mask_camera=np.ones((8, 8, 4), bool),
+             mask_lidar=np.ones((8, 8, 4), bool))
+    grids = tool.load_grid(sub, 'pred_occ', (8, 8, 4))
+    assert grids['convention'] == 'occ3d'
+    np.testing.assert_array_equal(grids['pred_occ'], pred)
+    marker = tmp_path / 'pwned'
+    flash = tmp_path / 'pred.npz'
+    np.savez_compressed(flash, pred=pred,
+                        gt=np.array(_RunsCode(str(marker)), dtype=object),
+                        sample_token='tok')
+    grids = tool.load_grid(str(flash), 'pred_occ', (8, 8, 4))
+    assert sorted(grids) == ['convention', 'pred_occ']
+    np.testing.assert_array_equal(grids['pred_occ'], pred)
+    with pytest.raises(ValueError, match="FlashOcc 'pred'"):
+        tool.load_grid(str(flash), 'gt_occ', (8, 8, 4))
+    out = tool.main(['--pred', str(flash), '--gt',
+                     str(tmp_path / 'labels.npz'), '--out',
+                     str(tmp_path / 'flash.png'), '--view-size', '40', '60'])
+    alone = tool.main(['--pred', sub, '--out', str(tmp_path / 'sub.png'),
+                       '--view-size', '40', '60'])
+    # GT, prediction and error map: three columns against one.
+    assert _png_size(out)[0] > 2 * _png_size(alone)[0]
+    assert not marker.exists()
 
 
 def test_from_config_checkpoint_and_index(tmp_path):

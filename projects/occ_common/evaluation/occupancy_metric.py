@@ -11,6 +11,7 @@ from ..datasets.nuscenes_classes import OCC3D_CLASS_NAMES
 from ..datasets.occ_formats import SURROUNDOCC_CLASS_NAMES
 from .occupancy_confusion import (confusion_matrix, geometric_iou, mean_iou,
                                   per_class_iou)
+from .occupancy_export import write_prediction, zip_folder_files
 
 # The label tables live once, in datasets/, so that the metric cannot
 # disagree with the loaders on an index.
@@ -62,6 +63,14 @@ class OccupancyMetric(BaseMetric):
     the subset flags, and ``'sample_idx'`` to name the sample in errors.
     Only confusion matrices are stored per sample.
 
+    With ``submission_prefix`` every prediction is also written there, in
+    the layout of its convention (:mod:`.occupancy_export`: Occ3D
+    ``<token>.npz`` files and their ``.zip``, SurroundOcc ``.npy`` rows),
+    by the rank that predicted it; with ``format_only`` (mmdet3d's
+    semantics, ``tools/test.py --format-only``) nothing is scored, no
+    ``gt_occ`` is needed (a split without labels runs) and the metric
+    returns no keys.
+
     Args:
         convention (str): ``'surroundocc'`` or ``'occ3d'``.
             Defaults to 'surroundocc'.
@@ -81,6 +90,10 @@ class OccupancyMetric(BaseMetric):
             ``(x0, y0, z0, x1, y1, z1)`` in ego coordinates; required with
             ``distance_ranges``. Defaults to None.
         ignore_index (int): GT label of unannotated voxels. Defaults to 255.
+        format_only (bool): Write the predictions, score nothing. Needs
+            ``submission_prefix``. Defaults to False.
+        submission_prefix (str, optional): Folder of the prediction files.
+            Defaults to None (none written).
         collect_device (str): Device to gather results on. Defaults to
             'cpu'.
         prefix (str, optional): Key prefix. Defaults to ``'occ'``.
@@ -100,6 +113,8 @@ class OccupancyMetric(BaseMetric):
                  voxel_size: Optional[Sequence[float]] = None,
                  point_cloud_range: Optional[Sequence[float]] = None,
                  ignore_index: int = 255,
+                 format_only: bool = False,
+                 submission_prefix: Optional[str] = None,
                  collect_device: str = 'cpu',
                  prefix: Optional[str] = None,
                  collect_dir: Optional[str] = None) -> None:
@@ -125,6 +140,11 @@ class OccupancyMetric(BaseMetric):
             c for c in range(self.num_classes) if c != self.empty_index
         ]
         self.use_camera_mask = convention == 'occ3d' and use_camera_mask
+        if format_only and submission_prefix is None:
+            raise ValueError('OccupancyMetric: format_only=True writes the '
+                             'predictions to submission_prefix; give one.')
+        self.format_only = format_only
+        self.submission_prefix = submission_prefix
         self.subsets = tuple(subsets or ())
         self.ignore_index = ignore_index
         self.distance_ranges = self._check_ranges(distance_ranges)
@@ -196,7 +216,18 @@ class OccupancyMetric(BaseMetric):
             data_samples (Sequence[dict]): See the class docstring.
         """
         for sample in data_samples:
-            self.results.append(self._sample_result(sample))
+            result = {} if self.format_only else self._sample_result(sample)
+            if self.submission_prefix is not None:
+                result['file'] = self._write(sample)
+            self.results.append(result)
+
+    def _write(self, sample: dict) -> str:
+        """Write the sample's prediction file; returns its name."""
+        name = sample.get('sample_idx', f'#{len(self.results)}')
+        pred = self._labels(sample, 'pred_occ', name)
+        self._check_pred(pred, name)
+        return write_prediction(self.submission_prefix, self.convention,
+                                sample, pred, self.empty_index)
 
     def _sample_result(self, sample: dict) -> dict:
         """Validate one sample and reduce it to confusion matrices."""
@@ -215,13 +246,7 @@ class OccupancyMetric(BaseMetric):
                 f'OccupancyMetric: sample {name}: gt_occ has labels '
                 f'{torch.unique(gt[bad_gt]).tolist()[:10]} outside [0, '
                 f'{self.num_classes}) and not {self.ignore_index}.')
-        # A model never predicts "ignore", so 255 is an error here too.
-        bad_pred = (pred < 0) | (pred >= self.num_classes)
-        if bool(bad_pred.any()):
-            raise ValueError(
-                f'OccupancyMetric: sample {name}: pred_occ has labels '
-                f'{torch.unique(pred[bad_pred]).tolist()[:10]} outside [0, '
-                f'{self.num_classes}).')
+        self._check_pred(pred, name)
         if self.use_camera_mask:
             if sample.get('mask_camera') is None:
                 raise ValueError(f'OccupancyMetric: sample {name} has no '
@@ -248,6 +273,16 @@ class OccupancyMetric(BaseMetric):
                 for in_range in self._column_masks(gt.device)
             ])
         return result
+
+    def _check_pred(self, pred: torch.Tensor, name) -> None:
+        """Refuse predicted labels outside the classes."""
+        # A model never predicts "ignore", so 255 is an error here too.
+        bad = (pred < 0) | (pred >= self.num_classes)
+        if bool(bad.any()):
+            raise ValueError(
+                f'OccupancyMetric: sample {name}: pred_occ has labels '
+                f'{torch.unique(pred[bad]).tolist()[:10]} outside [0, '
+                f'{self.num_classes}).')
 
     def _confusion(self, gt, pred, counted) -> np.ndarray:
         """Confusion matrix of the counted voxels as a small numpy array."""
@@ -286,8 +321,13 @@ class OccupancyMetric(BaseMetric):
         Returns:
             dict[str, float]: ``'IoU'``, ``'mIoU'``, one key per class name,
             and the subset / distance keys when enabled, in percent; NaN
-            where undefined (e.g. a subset without samples).
+            where undefined (e.g. a subset without samples). Nothing with
+            ``format_only``.
         """
+        if self.submission_prefix is not None:
+            self._finish_files([r['file'] for r in results])
+        if self.format_only:
+            return {}
         size = (self.num_classes, self.num_classes)
         total = sum((r['confusion'] for r in results), np.zeros(size, int))
         columns = {'all': total}
@@ -315,6 +355,15 @@ class OccupancyMetric(BaseMetric):
             })
         print_log(self._table(columns), logger='current')
         return metrics
+
+    def _finish_files(self, files: List[str]) -> None:
+        """Zip an Occ3D submission and say where the files are."""
+        where = f'{len(set(files))} {self.convention} prediction files in ' \
+            f'{self.submission_prefix}'
+        if self.convention == 'occ3d':
+            where += (' and the zip the Occ3D server takes: ' +
+                      zip_folder_files(self.submission_prefix, set(files)))
+        print_log(f'OccupancyMetric: wrote {where}', logger='current')
 
     def _scores(self, confusion: np.ndarray) -> Dict[str, float]:
         """Geometric IoU and mIoU in percent."""

@@ -40,15 +40,22 @@ class LoadOccupancyGT(BaseTransform):
             outside that visibility mask become ``ignore_index`` (the Occ3D
             camera-only protocol). Defaults to None (masks only returned).
         ignore_index (int): Label of ignored voxels. Defaults to 255.
+        allow_unlabelled (bool): Let a sample whose info lists no label
+            (``occ_path`` None, e.g. every sample of ``v1.0-test``) pass
+            without ``gt_occ``; a listed file that is missing or broken is
+            still an error. ``tools/test.py --format-only`` sets it, as
+            nothing is scored there. Defaults to False (such a sample is an
+            error naming it and its info file).
 
     Required Keys:
 
-    - occ_path (str): The label file.
+    - occ_path (str | None): The label file.
     - occ_format (str, optional)
 
     Added Keys:
 
-    - gt_occ (np.ndarray): Shape (X, Y, Z), uint8.
+    - gt_occ (np.ndarray): Shape (X, Y, Z), uint8 (not for an unlabelled
+      sample with ``allow_unlabelled``).
     - mask_camera, mask_lidar (np.ndarray): Shape (X, Y, Z), bool (Occ3D).
     - occ_pc_range (np.ndarray): Shape (6,), the grid's metric range.
     - occ_voxel_size (np.ndarray): Shape (3,).
@@ -57,7 +64,8 @@ class LoadOccupancyGT(BaseTransform):
     def __init__(self,
                  occ_format: Optional[str] = None,
                  mask_with: Optional[str] = None,
-                 ignore_index: int = IGNORE_INDEX) -> None:
+                 ignore_index: int = IGNORE_INDEX,
+                 allow_unlabelled: bool = False) -> None:
         if occ_format is not None and occ_format not in OCC_FORMATS:
             raise ValueError(f'occ_format must be one of '
                              f'{sorted(OCC_FORMATS)}, got {occ_format!r}')
@@ -67,6 +75,7 @@ class LoadOccupancyGT(BaseTransform):
         self.occ_format = occ_format
         self.mask_with = mask_with
         self.ignore_index = ignore_index
+        self.allow_unlabelled = allow_unlabelled
 
     def _surroundocc(self, raw: bytes, path: str, grid) -> dict:
         if not raw:
@@ -148,25 +157,30 @@ class LoadOccupancyGT(BaseTransform):
             raise ValueError('LoadOccupancyGT needs occ_format (argument or '
                              f'results["occ_format"]), got {fmt!r}')
         spec = OCC_FORMATS[fmt]
+        # The grid's geometry is the format's, labelled or not.
+        results['occ_pc_range'] = np.asarray(spec.point_cloud_range)
+        results['occ_voxel_size'] = np.asarray(spec.voxel_size)
         path = results.get('occ_path')
+        if path is None and self.allow_unlabelled:
+            return results
         if path is None:
             raise ValueError(
                 f'sample {results.get("token", "?")} has no {fmt} occupancy '
-                f'label in {results.get("ann_file", "its info file")}')
+                f'label in {results.get("ann_file", "its info file")} (a '
+                'split without labels runs with tools/test.py --format-only)')
         raw = read_bytes(path, f'{fmt} occupancy label', None)
         grid = np.asarray(spec.grid_size)
         loaded = self._surroundocc(raw, path, grid) if fmt == 'surroundocc' \
             else self._occ3d(raw, path, grid)
         results.update(loaded)
-        results['occ_pc_range'] = np.asarray(spec.point_cloud_range)
-        results['occ_voxel_size'] = np.asarray(spec.voxel_size)
         return results
 
     def __repr__(self) -> str:
         """str: The transform and its arguments."""
         return (f'{self.__class__.__name__}(occ_format={self.occ_format!r}, '
                 f'mask_with={self.mask_with!r}, '
-                f'ignore_index={self.ignore_index})')
+                f'ignore_index={self.ignore_index}, '
+                f'allow_unlabelled={self.allow_unlabelled})')
 
 
 @TRANSFORMS.register_module()

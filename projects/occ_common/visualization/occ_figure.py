@@ -41,7 +41,8 @@ def render_occ_figure(pred=None,
                       view_size: Sequence[int] = (360, 480),
                       azimuth: float = -150.0,
                       elevation: float = 40.0,
-                      dpi: int = 100) -> np.ndarray:
+                      dpi: int = 100,
+                      forward: str = '+x') -> np.ndarray:
     """Render the picture of one sample.
 
     Args:
@@ -69,6 +70,9 @@ def render_occ_figure(pred=None,
         azimuth (float): 3D view azimuth in degrees. Defaults to -150.
         elevation (float): 3D view elevation in degrees. Defaults to 40.
         dpi (int): Resolution of the picture. Defaults to 100.
+        forward (str): Grid direction ahead of the car: up in the top-down
+            views, the origin of ``azimuth`` (:mod:`.orientation`).
+            Defaults to '+x' (the ego frame).
 
     Returns:
         np.ndarray: The picture, Shape (H, W, 3), uint8.
@@ -109,10 +113,10 @@ def render_occ_figure(pred=None,
     for key, (labels, colours, empty) in panels.items():
         views[key] = (
             render_bev(labels, colours, empty, ignore_index, mask, bev_scale,
-                       name=key),
+                       name=key, forward=forward),
             render_voxels(labels, colours, empty, ignore_index, mask,
                           voxel_size, view_size, azimuth, elevation,
-                          name=key))
+                          name=key, forward=forward))
     cameras = None
     if images is not None:
         if lidar2img is None or point_cloud_range is None:

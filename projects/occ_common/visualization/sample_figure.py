@@ -4,7 +4,8 @@ A data sample (``Det3DDataSample``, any ``BaseDataElement`` or a plain
 dict) carries ``pred_occ`` and / or ``gt_occ`` (Shape (X, Y, Z)), maybe
 ``mask_camera``, and the metainfo that :class:`~projects.occ_common.
 transforms.PackOccInputs` packs: ``sample_idx``, ``lidar2img``,
-``occ_pc_range``, ``occ_voxel_size``.
+``occ_pc_range``, ``occ_voxel_size``, and ``lidar2ego`` / ``occ_format``,
+which tell the direction ahead of the car (:mod:`.orientation`).
 """
 from typing import Optional, Sequence
 
@@ -12,6 +13,7 @@ import numpy as np
 import torch
 
 from .occ_figure import render_occ_figure
+from .orientation import sample_forward
 
 
 def sample_field(sample, key: str, default=None):
@@ -86,7 +88,9 @@ def render_data_sample(sample,
         draw_gt (bool): Draw ``gt_occ``. Defaults to True.
         use_mask (bool): Draw and count only ``mask_camera`` voxels when
             the sample has one. Defaults to True.
-        **figure_kwargs: Passed on (``view_size``, ``azimuth``, ...).
+        **figure_kwargs: Passed on (``view_size``, ``azimuth``, ...);
+            ``forward`` defaults to the sample's (its ``lidar2ego``, else
+            its ``occ_format``'s frame).
 
     Returns:
         np.ndarray: Shape (H, W, 3), uint8.
@@ -104,6 +108,11 @@ def render_data_sample(sample,
     voxel_size = sample_field(sample, 'occ_voxel_size')
     pc_range = sample_field(sample, 'occ_pc_range')
     lidar2img = sample_field(sample, 'lidar2img')
+    figure_kwargs.setdefault(
+        'forward',
+        sample_forward(
+            sample_field(sample, 'lidar2ego'),
+            sample_field(sample, 'occ_format')))
     images = None
     geometry = (lidar2img, pc_range, voxel_size)
     if img is not None and all(v is not None for v in geometry):

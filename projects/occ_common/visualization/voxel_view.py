@@ -14,8 +14,11 @@ Ordering by the distance of the face centres from the eye suits a grid:
 its faces are equal and never intersect, so a wrong overlap needs a
 grazing view of two faces of very different depth, which the default
 elevation avoids.
-The grid is centred at the origin; x is forward, y left, z up, as in the
-nuScenes ego frame.
+The grid is centred at the origin, z up; the camera's azimuth is measured
+from the grid direction ahead of the car (``forward``, :mod:`.orientation`),
+so a view from behind the car is a view from behind in the ego frame
+(Occ3D) and in nuScenes' LiDAR frame (SurroundOcc) alike, and a top-down
+view puts ahead of the car up.
 """
 import math
 from typing import Optional, Sequence, Tuple
@@ -24,6 +27,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from .label_grid import occupied_voxels
+from .orientation import FORWARD_HEADINGS, check_forward
 from .palette import BACKGROUND
 
 #: Brightness of a face by its normal ``(axis, sign)``: lit from above and
@@ -41,23 +45,29 @@ FACE_SHADES = {
 _QUAD = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=np.float64)
 
 
-def look_at(extent: np.ndarray, azimuth: float, elevation: float,
-            fov: float) -> Tuple[np.ndarray, np.ndarray, float]:
+def look_at(extent: np.ndarray,
+            azimuth: float,
+            elevation: float,
+            fov: float,
+            forward: str = '+x') -> Tuple[np.ndarray, np.ndarray, float]:
     """A camera on a sphere round the grid, looking at its centre.
 
     Args:
         extent (np.ndarray): Grid size in metres (x, y, z). Shape (3,).
         azimuth (float): Direction of the camera from the centre in
-            degrees, counter-clockwise from +x (180 = behind the ego).
+            degrees, counter-clockwise from ``forward`` (180 = behind the
+            ego).
         elevation (float): Degrees above the xy plane (90 = top-down).
         fov (float): Field of view in degrees: the perspective strength.
+        forward (str): Grid direction ahead of the car. Defaults to '+x'.
 
     Returns:
         tuple: ``eye`` Shape (3,), ``axes`` Shape (3, 3) whose rows are
         the camera's right, up and forward unit vectors, and the distance
         from the eye to the centre.
     """
-    az, el = math.radians(azimuth), math.radians(elevation)
+    heading = math.radians(FORWARD_HEADINGS[check_forward(forward)])
+    az, el = math.radians(azimuth) + heading, math.radians(elevation)
     direction = np.array([
         math.cos(el) * math.cos(az),
         math.cos(el) * math.sin(az),
@@ -67,14 +77,15 @@ def look_at(extent: np.ndarray, azimuth: float, elevation: float,
     radius = 0.5 * float(np.linalg.norm(extent))
     distance = 1.05 * radius / math.sin(math.radians(fov) / 2)
     eye = distance * direction
-    forward = -direction
-    right = np.cross(forward, [0.0, 0.0, 1.0])
+    view = -direction
+    right = np.cross(view, [0.0, 0.0, 1.0])
     if np.linalg.norm(right) < 1e-6:
-        # Looking straight down: keep x (forward) pointing up the image.
-        right = np.cross(forward, [1.0, 0.0, 0.0])
+        # Looking straight down: keep ahead of the car up the image.
+        right = np.cross(view,
+                         [math.cos(heading), math.sin(heading), 0.0])
     right /= np.linalg.norm(right)
-    up = np.cross(right, forward)
-    return eye, np.stack([right, up, forward]), distance
+    up = np.cross(right, view)
+    return eye, np.stack([right, up, view]), distance
 
 
 def surface_faces(drawn: np.ndarray, voxel_size: np.ndarray,
@@ -171,7 +182,8 @@ def render_voxels(labels: np.ndarray,
                   fov: float = 40.0,
                   edge_shade: Optional[float] = 0.75,
                   background: Sequence[int] = BACKGROUND,
-                  name: str = 'occupancy') -> np.ndarray:
+                  name: str = 'occupancy',
+                  forward: str = '+x') -> np.ndarray:
     """Render the 3D perspective view.
 
     Args:
@@ -193,6 +205,8 @@ def render_voxels(labels: np.ndarray,
         background (Sequence[int]): RGB where no voxel is seen. Defaults
             to white.
         name (str): Named in errors. Defaults to 'occupancy'.
+        forward (str): Grid direction ahead of the car, the origin of
+            ``azimuth`` (see :mod:`.orientation`). Defaults to '+x'.
 
     Returns:
         np.ndarray: Shape (H, W, 3), uint8.
@@ -206,7 +220,7 @@ def render_voxels(labels: np.ndarray,
         return np.asarray(image).copy()
     size = np.asarray(voxel_size, dtype=np.float64)
     eye, axes, _ = look_at(
-        np.asarray(labels.shape) * size, azimuth, elevation, fov)
+        np.asarray(labels.shape) * size, azimuth, elevation, fov, forward)
     corners, centres, voxels, shade = surface_faces(drawn, size, eye)
 
     pixels = project_to_frame(corners, eye, axes,

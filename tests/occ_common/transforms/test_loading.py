@@ -152,3 +152,21 @@ def test_lidarseg_labels_optional(tmp_path):
         LoadLidarSegLabels(optional=True)(
             dict(pts_semantic_mask_path=str(tmp_path / 'gone.bin')))
     assert 'optional=True' in repr(LoadLidarSegLabels(optional=True))
+
+
+def test_unlabelled_sample_passes_only_when_allowed(tmp_path):
+    """A test-split sample (info without a label path) is an error by
+    default, naming the sample and the way out; with allow_unlabelled it
+    gets the format's grid geometry and no gt_occ. A listed label that is
+    missing stays an error either way."""
+    sample = dict(occ_path=None, token='t1', ann_file='infos_test.pkl')
+    with pytest.raises(ValueError, match='t1 has no occ3d.*--format-only'):
+        LoadOccupancyGT('occ3d')(dict(sample))
+    out = LoadOccupancyGT('occ3d', allow_unlabelled=True)(dict(sample))
+    assert 'gt_occ' not in out and 'mask_camera' not in out
+    np.testing.assert_allclose(out['occ_pc_range'],
+                               [-40, -40, -1, 40, 40, 5.4])
+    np.testing.assert_allclose(out['occ_voxel_size'], [0.4, 0.4, 0.4])
+    with pytest.raises(FileNotFoundError, match='gone.npy'):
+        LoadOccupancyGT('surroundocc', allow_unlabelled=True)(
+            dict(occ_path=str(tmp_path / 'gone.npy')))
