@@ -270,6 +270,10 @@ def benchmark_model(config: str, checkpoint: Optional[str], args) -> Dict:
     device = torch.device(args.device)
     model = MODELS.build(cfg.model)
     if checkpoint:
+        # The config's plugin provides the restricted loader; nothing is
+        # installed on import.
+        from projects.occ_common.utils import install_checkpoint_loader
+        install_checkpoint_loader()
         load_checkpoint(model, checkpoint, map_location='cpu')
     model.to(device).eval()
     if args.synthetic_batch:

@@ -15,17 +15,14 @@ Every step is a subprocess of the user-facing tools, so the demo shows
 mmengine's own logs and progress bars; this script imports no plugin code.
 """
 import argparse
-import glob
 import json
 import os
 import os.path as osp
 import shutil
-import subprocess
-import sys
 import time
-from typing import Dict, List
 
-ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+from occ_runs import (data_options, format_table, last_metrics, pct,
+                      prepare_world, run, tool)
 
 #: (name, config, label convention, epochs). The epochs fit the demo's
 #: 20-minute budget on 2 idle CPU cores (OccCylindrical ~2.5 s and SDG-Fusion
@@ -68,43 +65,6 @@ def parse_args(argv=None):
     return parser.parse_args(argv)
 
 
-def run(cmd: List[str], log_path: str) -> None:
-    """Run ``cmd`` from the repository root, echo and log its output."""
-    print(f'\n$ {" ".join(cmd)}', flush=True)
-    with open(log_path, 'a') as log:
-        proc = subprocess.Popen(
-            cmd,
-            cwd=ROOT,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-            bufsize=1)
-        for line in proc.stdout:
-            sys.stdout.write(line)
-            log.write(line)
-        if proc.wait() != 0:
-            raise SystemExit(f'demo: step failed ({proc.returncode}): '
-                             f'{" ".join(cmd)}; see {log_path}')
-
-
-def tool(name: str) -> List[str]:
-    """The command prefix of ``tools/<name>`` with this interpreter."""
-    return [sys.executable, osp.join(ROOT, 'tools', name)]
-
-
-def last_metrics(work_dir: str) -> Dict[str, float]:
-    """The metrics of the newest test run logged under ``work_dir``."""
-    logs = sorted(glob.glob(osp.join(work_dir, '*', '*.json')))
-    if not logs:
-        raise SystemExit(f'demo: no metrics logged in {work_dir}')
-    with open(logs[-1]) as f:
-        records = [json.loads(line) for line in f if line.strip()]
-    metrics = [r for r in records if 'occ/mIoU' in r]
-    if not metrics:
-        raise SystemExit(f'demo: {logs[-1]} holds no occ/mIoU')
-    return metrics[-1]
-
-
 def evaluate_untrained(config: str, work_dir: str, *options: str) -> None:
     """Test the freshly initialised model of ``config`` (no checkpoint).
 
@@ -122,46 +82,6 @@ def evaluate_untrained(config: str, work_dir: str, *options: str) -> None:
     Runner.from_cfg(cfg).test()
 
 
-def data_options(data_root: str) -> List[str]:
-    """``--cfg-options`` pointing every dataloader at ``data_root``."""
-    root = data_root.rstrip('/') + '/'
-    return [
-        f'{split}_dataloader.dataset.data_root={root}'
-        for split in ('train', 'val', 'test')
-    ]
-
-
-def format_table(rows: List[dict]) -> str:
-    """Markdown table: one column per model, one row per metric."""
-    names = [r['model'] for r in rows]
-    lines = ['| | ' + ' | '.join(names) + ' |',
-             '|---' * (len(names) + 1) + '|']
-
-    def add(label, values):
-        lines.append(f'| {label} | ' + ' | '.join(values) + ' |')
-
-    def pct(value):
-        return 'n/a' if value is None or value != value else f'{value:.2f}'
-
-    add('labels', [r['labels'] for r in rows])
-    add('train time', [f'{r["train_s"] / 60:.1f} min' for r in rows])
-    add('epochs', [str(r['epochs']) for r in rows])
-    add('IoU', [pct(r['metrics'].get('occ/IoU')) for r in rows])
-    add('**mIoU**', [pct(r['metrics'].get('occ/mIoU')) for r in rows])
-    add('mIoU untrained',
-        [pct(r['untrained'].get('occ/mIoU')) for r in rows])
-    classes = []
-    for r in rows:
-        for key in r['metrics']:
-            name = key[len('occ/'):]
-            if (key.startswith('occ/') and '/' not in name
-                    and name not in ('IoU', 'mIoU') and name not in classes):
-                classes.append(name)
-    for name in classes:
-        add(name, [pct(r['metrics'].get(f'occ/{name}')) for r in rows])
-    return '\n'.join(lines)
-
-
 def main(argv=None):
     """Run the demo."""
     args = parse_args(argv)
@@ -175,16 +95,7 @@ def main(argv=None):
     open(log_path, 'w').close()
     data_root = args.data_root
 
-    if not osp.isdir(osp.join(data_root, 'v1.0-mini')):
-        run(tool('create_synthetic_nuscenes.py') + [
-            data_root, '--scenes',
-            str(args.scenes), '--samples',
-            str(args.samples)
-        ], log_path)
-    if not osp.isfile(osp.join(data_root, 'nuscenes_occ_infos_val.pkl')):
-        run(tool('create_data.py') +
-            ['nuscenes', '--root-path', data_root, '--version', 'v1.0-mini'],
-            log_path)
+    prepare_world(data_root, log_path, args.scenes, args.samples)
 
     rows = []
     for name, config, labels, epochs in MODELS:
@@ -220,7 +131,7 @@ def main(argv=None):
         ] + data, log_path)
         rows.append(
             dict(
-                model=name,
+                name=name,
                 config=config,
                 labels=labels,
                 epochs=epochs,
@@ -229,7 +140,10 @@ def main(argv=None):
                 untrained=untrained,
                 pictures=pictures))
 
-    table = format_table(rows)
+    table = format_table(
+        rows, [('epochs', lambda r: str(r['epochs'])),
+               ('mIoU untrained',
+                lambda r: pct(r['untrained'].get('occ/mIoU')))])
     with open(osp.join(out, 'results.md'), 'w') as f:
         f.write(table + '\n')
     with open(osp.join(out, 'results.json'), 'w') as f:

@@ -1,19 +1,25 @@
 """Evaluate a checkpoint (mmdet3d 1.x ``tools/test.py`` interface).
 
-The models, datasets and hooks come from the config's ``custom_imports``,
-which also installs the weights-only checkpoint loader of
-``projects.occ_common``; the script itself imports only the CPU
-process-group helpers of ``projects.occ_common.utils.cpu_dist``. Flags and
-behaviour follow mmdet3d 1.4's script.
+The models, datasets and hooks come from the config's ``custom_imports``;
+the script itself imports only helpers of ``projects.occ_common.utils``
+(CPU process groups, config checks). Flags and behaviour follow mmdet3d
+1.4's script, with checks added: the script adds ``CheckpointMatchHook``,
+which installs the restricted checkpoint loader before anything is loaded
+and refuses a checkpoint with non-finite weights, or whose keys or shapes
+differ from the model's (unless ``--allow-key-mismatch``);
+``--cfg-options`` and the config's top-level keys are checked by
+``config_checks``.
 """
 import argparse
 import os
 import os.path as osp
 
-from mmengine.config import Config, ConfigDict, DictAction
+from mmengine.config import Config, ConfigDict
 from mmengine.registry import RUNNERS
 from mmengine.runner import Runner
 
+from projects.occ_common.utils.config_checks import (CfgOptionsAction,
+                                                     apply_cfg_options)
 from projects.occ_common.utils.cpu_dist import (finalize_distributed,
                                                 setup_cpu_distributed)
 
@@ -38,7 +44,7 @@ def parse_args(argv=None):
     parser.add_argument(
         '--cfg-options',
         nargs='+',
-        action=DictAction,
+        action=CfgOptionsAction,
         help='override some settings in the used config, the key-value pair '
         'in xxx=yyy format will be merged into config file. If the value to '
         'be overwritten is a list, it should be like key="[a,b]" or key=a,b '
@@ -51,6 +57,12 @@ def parse_args(argv=None):
         default='none',
         help='job launcher')
     parser.add_argument('--tta', action='store_true', help='test time aug')
+    parser.add_argument(
+        '--allow-key-mismatch',
+        action='store_true',
+        help='evaluate a checkpoint whose keys or shapes differ from the '
+        "model's (missing ones keep their initialisation); refused by "
+        'default')
     parser.add_argument('--local_rank', '--local-rank', type=int, default=0)
     args = parser.parse_args(argv)
     if 'LOCAL_RANK' not in os.environ:
@@ -79,8 +91,7 @@ def build_cfg(args) -> Config:
     """Load the config and apply the command-line overrides."""
     cfg = Config.fromfile(args.config)
     cfg.launcher = args.launcher
-    if args.cfg_options is not None:
-        cfg.merge_from_dict(args.cfg_options)
+    apply_cfg_options(cfg, args)
 
     if args.work_dir is not None:
         cfg.work_dir = args.work_dir
@@ -89,6 +100,12 @@ def build_cfg(args) -> Config:
                                 osp.splitext(osp.basename(args.config))[0])
 
     cfg.load_from = args.checkpoint
+    # Registered by projects.occ_common (the config's custom_imports).
+    cfg.custom_hooks = list(cfg.get('custom_hooks', None) or []) + [
+        dict(
+            type='CheckpointMatchHook',
+            allow_key_mismatch=args.allow_key_mismatch)
+    ]
     if args.show or args.show_dir:
         cfg = trigger_visualization_hook(cfg, args)
 

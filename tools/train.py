@@ -1,20 +1,25 @@
 """Train a model from a config (mmdet3d 1.x ``tools/train.py`` interface).
 
 The models, datasets and hooks come from the config's ``custom_imports``;
-the script itself imports only the CPU process-group helpers of
-``projects.occ_common.utils.cpu_dist``. Flags and behaviour follow mmdet3d
-1.4's script.
+the script itself imports only helpers of ``projects.occ_common.utils``
+(CPU process groups, config checks). Flags and behaviour follow mmdet3d
+1.4's script; ``--cfg-options`` and the config's top-level keys are
+checked first (``config_checks``), and ``--resume`` resumes from the
+newest complete checkpoint of the work dir even without a
+``last_checkpoint`` pointer (``CheckpointRecoveryHook`` of the configs).
 """
 import argparse
 import logging
 import os
 import os.path as osp
 
-from mmengine.config import Config, DictAction
+from mmengine.config import Config
 from mmengine.logging import print_log
 from mmengine.registry import RUNNERS
 from mmengine.runner import Runner
 
+from projects.occ_common.utils.config_checks import (CfgOptionsAction,
+                                                     apply_cfg_options)
 from projects.occ_common.utils.cpu_dist import (finalize_distributed,
                                                 setup_cpu_distributed)
 
@@ -50,7 +55,7 @@ def parse_args(argv=None):
     parser.add_argument(
         '--cfg-options',
         nargs='+',
-        action=DictAction,
+        action=CfgOptionsAction,
         help='override some settings in the used config, the key-value pair '
         'in xxx=yyy format will be merged into config file. If the value to '
         'be overwritten is a list, it should be like key="[a,b]" or key=a,b '
@@ -74,8 +79,7 @@ def build_cfg(args) -> Config:
     """Load the config and apply the command-line overrides."""
     cfg = Config.fromfile(args.config)
     cfg.launcher = args.launcher
-    if args.cfg_options is not None:
-        cfg.merge_from_dict(args.cfg_options)
+    apply_cfg_options(cfg, args)
 
     # work_dir priority: CLI > config > ./work_dirs/<config name>.
     if args.work_dir is not None:

@@ -177,11 +177,15 @@ def predict_sample(args):
     from mmengine.registry import DATASETS, MODELS, init_default_scope
     from mmengine.runner import load_checkpoint
 
+    from projects.occ_common.utils import install_checkpoint_loader
+
     cfg = Config.fromfile(args.config)
     if args.cfg_options:
         cfg.merge_from_dict(args.cfg_options)
     init_default_scope(cfg.get('default_scope', 'mmdet3d'))
     model = MODELS.build(cfg.model)
+    # Nothing is installed on import: load through the restricted loader.
+    install_checkpoint_loader()
     load_checkpoint(model, args.checkpoint, map_location='cpu')
     model.to(args.device).eval()
     dataset = DATASETS.build(cfg.test_dataloader.dataset)

@@ -5,29 +5,31 @@ default_hooks = dict(
     timer=dict(type='IterTimerHook'),
     logger=dict(type='LoggerHook', interval=50),
     param_scheduler=dict(type='ParamSchedulerHook'),
-    # backend_args: write each .pth atomically (temp file + fsync + rename),
-    # so a crash while saving never leaves a truncated checkpoint; see
-    # projects/occ_common/hooks/atomic_file_backend.py.
-    checkpoint=dict(
-        type='CheckpointHook',
-        interval=1,
-        max_keep_ckpts=3,
-        backend_args=dict(backend='atomic_local')),
+    # Writes each .pth atomically, reads it back, and only then deletes the
+    # oldest: a kill, Ctrl-C or full disk during a save never leaves fewer
+    # than one complete checkpoint; see
+    # projects/occ_common/hooks/safe_checkpoint_hook.py.
+    checkpoint=dict(type='SafeCheckpointHook', interval=1, max_keep_ckpts=3),
     sampler_seed=dict(type='DistSamplerSeedHook'),
     # Off until tools/test.py --show-dir DIR sets draw=True: then one
     # picture (GT, prediction, error; top-down and 3D) per evaluated sample.
     visualization=dict(type='OccVisualizationHook', draw=False))
 
 custom_hooks = [
-    # Writes checkpoints that load with torch.load(weights_only=True); see
+    # Loads checkpoints (zoo ones included) with a restricted unpickler that
+    # refuses any pickled code; see
     # projects/occ_common/hooks/weights_only_checkpoint_hook.py.
     dict(type='WeightsOnlyCheckpointHook'),
-    # Stops at the first NaN / inf loss term, naming the iteration and the
-    # term, before CheckpointHook can save or rotate checkpoints.
+    # Stops at the first NaN / inf loss term or gradient norm, and refuses
+    # to save non-finite weights, naming the iteration and the term and
+    # keeping the last good checkpoint.
     dict(type='NonFiniteLossHook'),
-    # Before resuming: removes partial writes and repairs an empty
-    # last_checkpoint left by a crash.
+    # --resume: removes partial writes and resumes from the newest complete
+    # checkpoint, with or without a last_checkpoint pointer.
     dict(type='CheckpointRecoveryHook'),
+    # Seeds each sample's random augmentation by (seed, epoch, index), so a
+    # resumed run repeats an uninterrupted one exactly.
+    dict(type='AugmentationSeedHook'),
 ]
 
 env_cfg = dict(

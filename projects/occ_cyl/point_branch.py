@@ -12,6 +12,7 @@ from torch import Tensor, nn
 
 from projects.occ_common.geometry.depth import project_points
 from projects.occ_common.models.layers import cartesian_to_cylindrical
+from projects.occ_common.models.sparse.sparse_norm_act import batch_norm_rows
 
 
 def _mlp(channels: Sequence[int], norm_cfg: ConfigType) -> nn.Sequential:
@@ -24,6 +25,27 @@ def _mlp(channels: Sequence[int], norm_cfg: ConfigType) -> nn.Sequential:
             nn.ReLU(inplace=True)
         ]
     return nn.Sequential(*layers)
+
+
+def run_mlp(mlp: nn.Sequential, x: Tensor) -> Tensor:
+    """Apply a point MLP, tolerating a single point in training.
+
+    ``nn.BatchNorm1d`` raises in training on one row (a batch whose only
+    LiDAR point survived the filters); :func:`batch_norm_rows` normalises
+    such a batch with the running statistics instead, as the sparse
+    encoders do.
+
+    Args:
+        mlp (nn.Sequential): The MLP of :func:`_mlp`.
+        x (Tensor): Shape (P, C_in).
+
+    Returns:
+        Tensor: Shape (P, C_out).
+    """
+    for layer in mlp:
+        x = batch_norm_rows(layer, x) if isinstance(
+            layer, nn.BatchNorm1d) else layer(x)
+    return x
 
 
 def sample_image_features(xyz: Tensor,
@@ -168,7 +190,7 @@ class LidarPointBranch(BaseModule):
         if self.with_cylindrical_input:
             cyl = cartesian_to_cylindrical(pts[:, :3])
             geo_in = torch.cat([pts, cyl[:, :2]], dim=1)
-        fused = [self.geo_mlp(geo_in)]
+        fused = [run_mlp(self.geo_mlp, geo_in)]
         if self.with_image_features:
             img_feats = [
                 sample_image_features(xyz[:, :3].to(context.dtype),
@@ -177,5 +199,5 @@ class LidarPointBranch(BaseModule):
                 for i, xyz in enumerate(points)
             ]
             fused.append(torch.cat(img_feats, dim=0))
-        out = self.fuse_mlp(torch.cat(fused, dim=1))
+        out = run_mlp(self.fuse_mlp, torch.cat(fused, dim=1))
         return list(out.split(counts, dim=0))

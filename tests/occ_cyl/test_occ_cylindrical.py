@@ -110,6 +110,19 @@ def test_loss_terms_and_backward_with_an_empty_cloud():
     assert no_grad == []
 
 
+def test_one_lidar_point_trains():
+    """A batch whose only LiDAR point survived the filters: BatchNorm1d of
+    the point branch raised ("Expected more than 1 value per channel")."""
+    model = _build()
+    model.train()
+    data = _data(model, True, batch_size=1, num_points=(1, ))
+    assert data['inputs']['points'][0].shape[0] == 1
+    losses = model(**data, mode='loss')
+    assert all(torch.isfinite(v) for v in losses.values())
+    sum(losses.values()).backward()
+    assert model.point_branch.geo_mlp[0].weight.grad is not None
+
+
 def test_predict_returns_finest_labels_and_keeps_gt():
     """predict sets pred_occ (8, 8, 4) int64 in [0, 4) and keeps gt_occ and
     mask_camera for the metric; tensor mode returns both scales' logits."""

@@ -95,6 +95,24 @@ def test_all_empty_and_lidar_only():
     torch.testing.assert_close(a, b)
 
 
+def test_one_point_in_training_uses_the_running_statistics():
+    """One point cannot give batch statistics: the branch normalises it
+    with the running ones (the eval-mode result), leaves them unchanged,
+    and the MLP weights still get a gradient."""
+    branch = _branch(with_image_features=False)
+    ctx = torch.zeros(1, 4, 1, 2, 4)
+    pts = [torch.tensor([[1.0, 2.0, 0.5, 0.3, 0.0]])]
+    running = branch.geo_mlp[1].running_mean.clone()
+    out = branch(pts, ctx, _rig()[None], (32, 64), [(32, 64)])[0]
+    assert branch.training and out.shape == (1, 6)
+    assert torch.equal(branch.geo_mlp[1].running_mean, running)
+    out.sum().backward()
+    assert branch.geo_mlp[0].weight.grad.abs().sum() > 0
+    expected = branch.eval()(pts, ctx, _rig()[None], (32, 64),
+                             [(32, 64)])[0]
+    torch.testing.assert_close(out.detach(), expected)
+
+
 def test_bad_points_raise():
     """Points with the wrong width name the sample."""
     branch = _branch()

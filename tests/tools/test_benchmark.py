@@ -37,10 +37,11 @@ def test_single_model_json(tmp_path, capsys):
 
 
 def test_compare_identical_models(tmp_path, capsys):
-    """--compare toy toy: params ratio exactly 1, latency ratio near 1.
+    """--compare toy toy: params ratio exactly 1, a positive latency ratio.
 
-    The toy forward takes milliseconds on a shared 2-core machine, so the
-    latency bound is loose: within a factor 5 either way.
+    Timings are not asserted: on a shared machine the ratio of two
+    millisecond forwards has been measured at 153 under load. That the
+    ratio is the quotient of the two reported medians is the checkable fact.
     """
     report = _tool().main([CONFIG, '--compare', CONFIG, '--runs', '5',
                            '--warmup', '2', '--device', 'cpu',
@@ -48,7 +49,9 @@ def test_compare_identical_models(tmp_path, capsys):
     assert len(report['models']) == 2
     assert report['models'][1]['batch_size'] == 2
     assert report['ratio']['params'] == 1.0
-    assert 0.2 < report['ratio']['latency_median'] < 5.0
+    medians = [m['latency_ms']['median'] for m in report['models']]
+    assert report['ratio']['latency_median'] == pytest.approx(
+        medians[1] / medians[0])
     assert 'ratio 2/1' in capsys.readouterr().out
 
 

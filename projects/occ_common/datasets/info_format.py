@@ -11,7 +11,9 @@ info file written by another converter (or an older one) is refused instead
 of being misread.
 """
 import re
-from typing import Mapping
+from typing import Mapping, Sequence, Tuple
+
+import numpy as np
 
 #: Version of the info-file schema written by this converter.
 INFO_VERSION = 'occ-nus-1.0'
@@ -68,6 +70,39 @@ def check_info_file(infos: Mapping, path: str) -> None:
             raise ValueError(
                 f'{path}: sample {entry.get("token", "?")} lacks the keys '
                 f'{missing} of info_version {INFO_VERSION!r}')
+
+
+def as_matrix(value,
+              shapes: Sequence[Tuple[int, int]],
+              where: str) -> np.ndarray:
+    """A calibration / pose matrix of an info file, checked.
+
+    Args:
+        value: The nested list (or array) of the info file.
+        shapes (Sequence[tuple[int, int]]): Accepted shapes, e.g.
+            ``[(4, 4)]`` or ``[(3, 3), (4, 4)]`` for ``cam2img``.
+        where (str): File, sample and key, for the error message.
+
+    Returns:
+        np.ndarray: The matrix, float64.
+
+    Raises:
+        ValueError: If it is not numeric, has another shape, or holds NaN
+            or inf.
+    """
+    expected = ' or '.join(f'{r}x{c}' for r, c in shapes)
+    try:
+        mat = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f'{where}: expected a {expected} matrix of numbers,'
+                         f' got {value!r:.80} ({err})') from None
+    if tuple(mat.shape) not in [tuple(s) for s in shapes]:
+        raise ValueError(f'{where}: expected a {expected} matrix, got shape '
+                         f'{tuple(mat.shape)}')
+    if not np.isfinite(mat).all():
+        raise ValueError(f'{where}: the matrix holds NaN or inf: '
+                         f'{mat.tolist()}')
+    return mat
 
 
 def weather_flags(description: str) -> dict:

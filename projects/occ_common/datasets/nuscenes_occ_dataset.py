@@ -3,22 +3,29 @@ import copy
 import os.path as osp
 from typing import Callable, List, Optional, Sequence, Union
 
-import numpy as np
 from mmdet3d.registry import DATASETS
 from mmengine.dataset import BaseDataset
-from mmengine.fileio import load
+from mmengine.fileio import get_local_path
 
-from .info_format import CAMERA_NAMES, check_info_file
+from ..utils.safe_pickle import load_info_file
+from .augmentation_seed import EpochSeed
+from .info_format import CAMERA_NAMES, as_matrix, check_info_file
 from .occ_formats import IGNORE_INDEX, OCC_FORMATS
+
+_MAT44 = [(4, 4)]
 
 
 @DATASETS.register_module()
 class NuScenesOccDataset(BaseDataset):
     """nuScenes key frames with multi-view images, sweeps and occupancy GT.
 
-    Reads the info files of ``tools/create_data.py`` (refusing any other
-    ``info_version``) and hands each sample to the pipeline with absolute
-    paths and numpy matrices. Which occupancy label a sample carries is set
+    Reads the info files of ``tools/create_data.py`` through a restricted
+    unpickler (refusing any other ``info_version``, and any pickled object
+    but containers, scalars and numpy arrays), checks every sample's keys
+    and matrices, and hands each sample to the pipeline with absolute
+    paths and numpy matrices. In training, each sample's random
+    augmentation is seeded by ``(seed, epoch, index)``
+    (:mod:`.augmentation_seed`). Which occupancy label a sample carries is set
     by ``occ_format``; the label formats differ in frame and classes:
 
     * ``'surroundocc'``: LiDAR frame; classes ``empty`` + 16 (17 names).
@@ -104,6 +111,7 @@ class NuScenesOccDataset(BaseDataset):
                 f'{occ_format} labels have {len(spec.class_names)} classes '
                 f'{spec.class_names}, metainfo gives {len(meta["classes"])}')
         self._frame_meta = dict(occ_format=occ_format, coord_frame=coord_frame)
+        self._epoch_seed = EpochSeed()
         super().__init__(
             data_root=data_root,
             ann_file=ann_file,
@@ -121,14 +129,26 @@ class NuScenesOccDataset(BaseDataset):
 
         Raises:
             FileNotFoundError: The info file does not exist.
-            ValueError: It is not an info file of this converter version.
+            ValueError: It is not an info file of this converter version,
+                it is empty, truncated or holds no sample, or a sample
+                lacks a key or has a malformed matrix (the message names
+                the file, the sample and the key).
+            RefusedGlobalError: It pickles an object other than
+                containers, scalars and numpy arrays (nothing is run).
         """
         if self.backend_args is None and not osp.isfile(self.ann_file):
             raise FileNotFoundError(
                 f'info file not found: {self.ann_file}; create it with '
                 'tools/create_data.py nuscenes --root-path <nuScenes root>')
-        infos = load(self.ann_file, backend_args=self.backend_args)
+        with get_local_path(self.ann_file, self.backend_args) as path:
+            infos = load_info_file(path)
         check_info_file(infos, self.ann_file)
+        if not infos['data_list']:
+            raise ValueError(
+                f'{self.ann_file} holds no samples (split '
+                f'{infos["metainfo"].get("split")!r} of the scenes '
+                f'{infos["metainfo"].get("scenes")}); check the split and '
+                '--version given to tools/create_data.py.')
         self._metainfo.update(self._frame_meta)
         for key, value in infos['metainfo'].items():
             self._metainfo.setdefault(key, value)
@@ -153,26 +173,47 @@ class NuScenesOccDataset(BaseDataset):
         Returns:
             dict: The entry with the keys above.
         """
-        lidar = info['lidar_points']
+        where = f'{self.ann_file}: sample {info["token"]}'
+        lidar = self._entry(info, 'lidar_points',
+                            ('lidar_path', 'num_pts_feats', 'lidar2ego'),
+                            where)
         lidar['lidar_path'] = self._join('pts', lidar['lidar_path'])
         info['lidar_path'] = lidar['lidar_path']
         info['num_pts_feats'] = lidar['num_pts_feats']
-        info['lidar2ego'] = np.asarray(lidar['lidar2ego'], dtype=np.float64)
-        info['ego2global'] = np.asarray(info['ego2global'], dtype=np.float64)
-        for sweep in info['lidar_sweeps']:
-            pts = sweep['lidar_points']
+        info['lidar2ego'] = as_matrix(lidar['lidar2ego'], _MAT44,
+                                      f'{where} lidar_points.lidar2ego')
+        info['ego2global'] = as_matrix(info['ego2global'], _MAT44,
+                                       f'{where} ego2global')
+        for i in range(len(info['lidar_sweeps'])):
+            name = f'{where} lidar_sweeps[{i}]'
+            sweep = self._entry(info['lidar_sweeps'], i,
+                                ('lidar_points', 'timestamp'), name)
+            pts = self._entry(sweep, 'lidar_points', ('lidar_path', ), name)
+            key = 'sensor2lidar' if 'sensor2lidar' in pts else 'lidar2sensor'
+            if key not in pts:
+                raise ValueError(f'{name}: lidar_points needs sensor2lidar '
+                                 f'or lidar2sensor; it has {sorted(pts)}')
+            pts[key] = as_matrix(pts[key], _MAT44,
+                                 f'{name}.lidar_points.{key}')
             pts['lidar_path'] = self._join('sweeps', pts['lidar_path'])
         missing = [c for c in self.cam_names if c not in info['images']]
         if missing:
             raise ValueError(f'{self.ann_file}: sample {info["token"]} has '
                              f'no {missing} images; it has '
                              f'{sorted(info["images"])}')
-        info['images'] = {
-            cam: dict(info['images'][cam],
-                      img_path=self._join('img',
-                                          info['images'][cam]['img_path']))
-            for cam in self.cam_names
-        }
+        images = {}
+        for cam in self.cam_names:
+            image = dict(self._entry(info['images'], cam,
+                                     ('img_path', 'cam2img', 'lidar2cam',
+                                      'cam2ego'), f'{where} images'))
+            image['img_path'] = self._join('img', image['img_path'])
+            image['cam2img'] = as_matrix(image['cam2img'], [(3, 3), (4, 4)],
+                                         f'{where} images.{cam}.cam2img')
+            for key in ('lidar2cam', 'cam2ego'):
+                image[key] = as_matrix(image[key], _MAT44,
+                                       f'{where} images.{cam}.{key}')
+            images[cam] = image
+        info['images'] = images
         info['pts_semantic_mask_path'] = self._join(
             'pts_semantic_mask', info['pts_semantic_mask_path'])
         for key in ('occ_surroundocc_path', 'occ_occ3d_path'):
@@ -183,12 +224,62 @@ class NuScenesOccDataset(BaseDataset):
         info['ann_file'] = self.ann_file
         return info
 
+    @staticmethod
+    def _entry(container, key, required, where: str) -> dict:
+        """``container[key]``, a dict holding the ``required`` keys."""
+        try:
+            entry = container[key]
+        except (KeyError, IndexError):
+            raise ValueError(f'{where}: missing {key!r}') from None
+        if not isinstance(entry, dict):
+            raise ValueError(f'{where}: {key!r} must be a dict, got '
+                             f'{type(entry).__name__}')
+        missing = [k for k in required if k not in entry]
+        if missing:
+            raise ValueError(f'{where}: {key} lacks the keys {missing}; it '
+                             f'has {sorted(entry)}')
+        return entry
+
     def filter_data(self) -> List[dict]:
         """Drop unlabelled samples when training with ``filter_empty_gt``.
 
         Returns:
             list[dict]: The kept samples.
+
+        Raises:
+            ValueError: If no sample is left.
         """
         if self.test_mode or not self.filter_empty_gt:
             return self.data_list
-        return [info for info in self.data_list if info['occ_path']]
+        kept = [info for info in self.data_list if info['occ_path']]
+        if not kept:
+            raise ValueError(
+                f'{self.ann_file}: none of its {len(self.data_list)} samples '
+                f'(every {self.load_interval}-th) has a {self.occ_format} '
+                'occupancy label, and filter_empty_gt drops unlabelled '
+                'samples in training; point tools/create_data.py at the '
+                f'{self.occ_format} labels (--surroundocc-root / '
+                '--occ3d-root).')
+        return kept
+
+    def set_augmentation_seed(self, seed: int, epoch: int) -> None:
+        """Seed the random augmentations of ``epoch`` (see
+        :mod:`.augmentation_seed`); called by ``AugmentationSeedHook``.
+
+        Args:
+            seed (int): The run's seed.
+            epoch (int): The 0-based epoch about to start.
+        """
+        self._epoch_seed.set(seed, epoch)
+
+    def prepare_data(self, idx: int):
+        """Run the pipeline with the random state of sample ``idx``.
+
+        Args:
+            idx (int): Sample index.
+
+        Returns:
+            dict: The pipeline's output.
+        """
+        with self._epoch_seed.context(idx):
+            return super().prepare_data(idx)

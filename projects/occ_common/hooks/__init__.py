@@ -1,16 +1,22 @@
 """Hooks of the occupancy plugins.
 
-Importing this package also registers the ``atomic_local`` file backend
-(:mod:`.atomic_file_backend`) with mmengine.
+Importing this package registers the hooks and nothing else; the
+``atomic_local`` file backend (:mod:`.atomic_file_backend`) is registered
+by the hooks that use it when they are built or run.
 """
-from .atomic_file_backend import AtomicLocalBackend, atomic_write
+from .atomic_file_backend import (AtomicLocalBackend, atomic_write,
+                                  register_atomic_backend)
+from .augmentation_seed_hook import AugmentationSeedHook
+from .checkpoint_match_hook import CheckpointMatchHook
 from .checkpoint_recovery_hook import CheckpointRecoveryHook
 from .non_finite_loss_hook import NonFiniteLossError, NonFiniteLossHook
 from .occ_visualization_hook import OccVisualizationHook
+from .safe_checkpoint_hook import SafeCheckpointHook
 from .weights_only_checkpoint_hook import WeightsOnlyCheckpointHook
 
 __all__ = [
-    'AtomicLocalBackend', 'CheckpointRecoveryHook', 'NonFiniteLossError',
-    'NonFiniteLossHook', 'OccVisualizationHook', 'WeightsOnlyCheckpointHook',
-    'atomic_write'
+    'AtomicLocalBackend', 'AugmentationSeedHook', 'CheckpointMatchHook',
+    'CheckpointRecoveryHook', 'NonFiniteLossError',
+    'NonFiniteLossHook', 'OccVisualizationHook', 'SafeCheckpointHook',
+    'WeightsOnlyCheckpointHook', 'atomic_write', 'register_atomic_backend'
 ]

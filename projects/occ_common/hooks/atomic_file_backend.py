@@ -10,11 +10,11 @@ old file or the complete new one. A crash leaves at most a temporary file
 (:func:`is_temporary_file`), which
 :class:`~.checkpoint_recovery_hook.CheckpointRecoveryHook` removes.
 
-Configs select it with ``default_hooks.checkpoint.backend_args =
-dict(backend='atomic_local')``; mmengine 0.10.7's ``CheckpointHook`` hands
+:class:`~.safe_checkpoint_hook.SafeCheckpointHook` writes through it (it
+registers the backend as ``atomic_local`` with mmengine when it is built;
+nothing is registered on import): mmengine 0.10.7's ``CheckpointHook`` hands
 ``backend_args`` to ``Runner.save_checkpoint``, which writes the ``.pth``
-through ``get_file_backend(...).put``. (The hook writes its small
-``last_checkpoint`` pointer with ``open``; the recovery hook repairs it.)
+through ``get_file_backend(...).put``.
 """
 import os
 import os.path as osp
@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Union
 
 from mmengine.fileio import LocalBackend, register_backend
+from mmengine.fileio.backends.registry_utils import backends
 
 #: Name under which the backend is registered with mmengine.
 BACKEND_NAME = 'atomic_local'
@@ -86,7 +87,6 @@ def atomic_write(filepath: Union[str, Path], data: bytes) -> None:
     _fsync_folder(folder)
 
 
-@register_backend(BACKEND_NAME)
 class AtomicLocalBackend(LocalBackend):
     """``LocalBackend`` whose ``put`` / ``put_text`` are atomic.
 
@@ -114,3 +114,9 @@ class AtomicLocalBackend(LocalBackend):
             encoding (str): Text encoding. Defaults to 'utf-8'.
         """
         atomic_write(filepath, obj.encode(encoding))
+
+
+def register_atomic_backend() -> None:
+    """Register :class:`AtomicLocalBackend` as ``atomic_local`` (once)."""
+    if backends.get(BACKEND_NAME) is not AtomicLocalBackend:
+        register_backend(BACKEND_NAME, AtomicLocalBackend)

@@ -1,40 +1,42 @@
-"""Keep Runner checkpoints loadable with ``torch.load(weights_only=True)``.
+"""Load every checkpoint of a run through the restricted unpickler.
 
-mmengine's ``HistoryBuffer.__getstate__`` adds its statistics functions
-(``HistoryBuffer.min`` ...) to the pickled state; pickle protocol 2 (torch's
-default) writes them as ``getattr(HistoryBuffer, 'min')``. Allowing
-``builtins.getattr`` in the weights-only unpickler would let a checkpoint
-reach any attribute of any allowed object, so instead this hook stores each
-buffer of the message hub as a plain dict when a checkpoint is saved and
-rebuilds the buffers when one is loaded, before the Runner restores its
-message hub. A checkpoint then holds only tensors, containers, primitives
-and numpy arrays / scalars (see :mod:`projects.occ_common.utils.
-safe_checkpoint`).
+:func:`~projects.occ_common.utils.safe_pickle.install_checkpoint_loader`
+makes mmengine load local and ``http(s)`` checkpoints with the restricted
+unpickler of :mod:`projects.occ_common.utils.safe_pickle`, which reads
+Runner checkpoints, zoo checkpoints included, and refuses anything else by
+name. Nothing is installed on import: this hook does it in ``before_run``,
+which ``Runner.train`` / ``val`` / ``test`` call before they initialise
+weights, load or resume.
+
+Earlier versions of this hook stored the message hub's ``HistoryBuffer``\\ s
+of a checkpoint as tagged dicts (so that no ``getattr`` was pickled); the
+restricted unpickler now rebuilds the buffers themselves, so new
+checkpoints keep mmengine's layout, and :meth:`after_load_checkpoint`
+still turns the dicts of those older checkpoints back into buffers.
 """
 from typing import Dict
 
-import numpy as np
 from mmdet3d.registry import HOOKS
 from mmengine.hooks import Hook
 from mmengine.logging.history_buffer import HistoryBuffer
 
-#: Marks a dict that stands for a ``HistoryBuffer`` in a checkpoint.
+from ..utils.safe_pickle import install_checkpoint_loader
+from .atomic_file_backend import register_atomic_backend
+
+#: Marks a dict that stands for a ``HistoryBuffer`` in an older checkpoint.
 BUFFER_TAG = '__history_buffer__'
 
 
-def buffer_to_dict(buffer: HistoryBuffer) -> Dict:
-    """The data of a ``HistoryBuffer`` as a dict of arrays and an int."""
-    log_history, count_history = buffer.data
-    return {
-        BUFFER_TAG: True,
-        'log_history': np.asarray(log_history),
-        'count_history': np.asarray(count_history),
-        'max_length': int(buffer.max_length),
-    }
-
-
 def dict_to_buffer(state: Dict) -> HistoryBuffer:
-    """Rebuild the ``HistoryBuffer`` stored by :func:`buffer_to_dict`."""
+    """Rebuild a ``HistoryBuffer`` stored as a tagged dict.
+
+    Args:
+        state (dict): ``log_history`` and ``count_history`` (arrays) and
+            ``max_length`` (int), tagged with :data:`BUFFER_TAG`.
+
+    Returns:
+        HistoryBuffer: The buffer.
+    """
     return HistoryBuffer(
         list(state['log_history']), list(state['count_history']),
         state['max_length'])
@@ -42,28 +44,22 @@ def dict_to_buffer(state: Dict) -> HistoryBuffer:
 
 @HOOKS.register_module()
 class WeightsOnlyCheckpointHook(Hook):
-    """Store the message hub's history buffers as plain data.
+    """Install the restricted checkpoint loader before the Runner loads.
 
-    Listed in ``custom_hooks`` of ``configs/_base_/default_runtime.py`` so
-    that every config of this library writes checkpoints that load with
-    ``weights_only=True``.
+    Listed in ``custom_hooks`` of ``configs/_base_/default_runtime.py``.
+    ``before_run`` also registers the ``atomic_local`` file backend, for
+    configs that name it in a plain ``CheckpointHook``.
     """
 
-    priority = 'VERY_LOW'
+    priority = 'VERY_HIGH'
 
-    def before_save_checkpoint(self, runner, checkpoint: dict) -> None:
-        """Replace each ``HistoryBuffer`` by :func:`buffer_to_dict`."""
-        hub = checkpoint.get('message_hub')
-        if hub is None:
-            return
-        hub['log_scalars'] = {
-            key: buffer_to_dict(value)
-            if isinstance(value, HistoryBuffer) else value
-            for key, value in hub['log_scalars'].items()
-        }
+    def before_run(self, runner) -> None:
+        """Install the loader (once per process)."""
+        install_checkpoint_loader()
+        register_atomic_backend()
 
     def after_load_checkpoint(self, runner, checkpoint: dict) -> None:
-        """Rebuild the buffers before the Runner restores its message hub."""
+        """Rebuild the tagged buffers of an older checkpoint."""
         hub = checkpoint.get('message_hub')
         if hub is None:
             return

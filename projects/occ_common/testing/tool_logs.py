@@ -94,6 +94,19 @@ def run_tool(script: str,
                           timeout=timeout)
 
 
+def run_create_data(*argv: str):
+    """``tools/create_data.py nuscenes ARGV`` run in this process.
+
+    Returns:
+        dict[str, str]: Split name -> written info file.
+    """
+    spec = importlib.util.spec_from_file_location(
+        'create_data', osp.join(REPO_ROOT, 'tools', 'create_data.py'))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.main(['nuscenes', *argv])
+
+
 def make_converted_world(root: str, scenes: int, samples: int, sweeps: int,
                          image_size: Tuple[int, int]) -> str:
     """Generate a synthetic world with the CLI and convert it.

@@ -85,6 +85,10 @@ class ToyOccupancyModel(BaseModel):
             iteration NaN (1-based, counting the ``mode='loss'`` calls of
             this process), to test the non-finite loss guard. Defaults to
             None (never).
+        explode_at_iter (int, optional): Make the gradients of this
+            training iteration infinite while its loss stays finite, so
+            that the step explodes the weights (counted as
+            ``nan_at_iter``). Defaults to None (never).
     """
 
     def __init__(self,
@@ -92,11 +96,13 @@ class ToyOccupancyModel(BaseModel):
                  num_classes: int = 3,
                  data_preprocessor: Optional[dict] = None,
                  init_cfg: Optional[dict] = None,
-                 nan_at_iter: Optional[int] = None) -> None:
+                 nan_at_iter: Optional[int] = None,
+                 explode_at_iter: Optional[int] = None) -> None:
         super().__init__(
             data_preprocessor=data_preprocessor, init_cfg=init_cfg)
         self.classifier = nn.Conv3d(in_channels, num_classes, 1)
         self.nan_at_iter = nan_at_iter
+        self.explode_at_iter = explode_at_iter
         self._loss_calls = 0
 
     def forward(self,
@@ -123,6 +129,8 @@ class ToyOccupancyModel(BaseModel):
             self._loss_calls += 1
             if self._loss_calls == self.nan_at_iter:
                 loss = loss * float('nan')
+            if self._loss_calls == self.explode_at_iter:
+                logits.register_hook(lambda grad: grad * float('inf'))
             return dict(loss_ce=loss)
         if mode == 'predict':
             for sample, pred in zip(data_samples, logits.argmax(1)):

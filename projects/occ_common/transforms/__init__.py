@@ -4,8 +4,8 @@ from .depth_maps import PointsToDepthMaps, PointsToSemanticMaps
 from .formatting import PackOccInputs
 from .frames import PointsToEgoFrame
 from .image_aug import MultiViewImageAug
-from .loading import (LoadLidarSegLabels, LoadMultiViewImagesOcc,
-                      LoadOccupancyGT)
+from .image_loading import LoadMultiViewImagesOcc
+from .loading import LoadLidarSegLabels, LoadOccupancyGT
 from .points_loading import LoadOccPointsFromFile, LoadOccPointsFromMultiSweeps
 
 __all__ = [

@@ -1,12 +1,11 @@
-"""Loading of multi-view images, occupancy labels and lidarseg labels.
+"""Loading of occupancy labels and lidarseg labels.
 
 Every loader checks what it reads and raises an error that names the file
 and what was expected, instead of failing later inside numpy.
 """
 import io
-from typing import Optional, Sequence
+from typing import Optional
 
-import mmcv
 import numpy as np
 from mmcv.transforms import BaseTransform
 from mmdet3d.registry import TRANSFORMS
@@ -14,115 +13,14 @@ from mmengine.fileio import get
 
 from ..datasets.nuscenes_classes import OCC_CLASS_NAMES, lidarseg_to_occ16
 from ..datasets.occ_formats import IGNORE_INDEX, OCC_FORMATS
-from .frames import refresh_lidar2img
 
 
-def _read_bytes(path: str, what: str, backend_args: Optional[dict]) -> bytes:
+def read_bytes(path: str, what: str, backend_args: Optional[dict]) -> bytes:
+    """The bytes of ``path``; a missing file is named with ``what``."""
     try:
         return get(path, backend_args=backend_args)
     except FileNotFoundError:
         raise FileNotFoundError(f'{what} not found: {path}') from None
-
-
-def _pad44(mat) -> np.ndarray:
-    """A 3x3 or 4x4 matrix as 4x4 float64."""
-    mat = np.asarray(mat, dtype=np.float64)
-    out = np.eye(4)
-    out[:mat.shape[0], :mat.shape[1]] = mat
-    return out
-
-
-@TRANSFORMS.register_module()
-class LoadMultiViewImagesOcc(BaseTransform):
-    """Load the camera images of a sample and stack their calibration.
-
-    Unlike mmdet3d's ``LoadMultiViewImageFromFiles`` it also stacks the
-    per-camera matrices into (N, 4, 4) arrays and starts the image
-    augmentation bookkeeping (``img_aug_matrix`` = identity), see
-    :mod:`.frames`. All views must have one size.
-
-    Args:
-        cam_names (Sequence[str], optional): Views to load, in order.
-            Defaults to the order of ``results['images']``.
-        to_float32 (bool): Convert images to float32. Defaults to False.
-        color_type (str): ``mmcv.imfrombytes`` flag. Defaults to 'color'
-            (BGR uint8; the data preprocessor converts to RGB).
-        backend_args (dict, optional): mmengine file backend arguments.
-
-    Required Keys:
-
-    - images (dict[str, dict]): Per camera ``img_path``, ``cam2img``
-      (3, 3), ``lidar2cam`` (4, 4), ``cam2ego`` (4, 4).
-
-    Added Keys:
-
-    - img (list[np.ndarray]): N images, each shape (H, W, 3).
-    - img_path (list[str]), cam_names (list[str]), num_views (int)
-    - ori_shape, img_shape, pad_shape (tuple[int, int]): (H, W).
-    - cam2img, lidar2cam, cam2ego, img_aug_matrix, lidar2img
-      (np.ndarray): Shape (N, 4, 4), float64.
-    """
-
-    def __init__(self,
-                 cam_names: Optional[Sequence[str]] = None,
-                 to_float32: bool = False,
-                 color_type: str = 'color',
-                 backend_args: Optional[dict] = None) -> None:
-        self.cam_names = None if cam_names is None else list(cam_names)
-        self.to_float32 = to_float32
-        self.color_type = color_type
-        self.backend_args = backend_args
-
-    def transform(self, results: dict) -> dict:
-        """Load the views.
-
-        Args:
-            results (dict): Pipeline state.
-
-        Returns:
-            dict: The state with the added keys.
-        """
-        token = results.get('token', '?')
-        cams = self.cam_names or list(results['images'])
-        imgs, paths, mats = [], [], dict(cam2img=[], lidar2cam=[], cam2ego=[])
-        for cam in cams:
-            if cam not in results['images']:
-                raise ValueError(f'sample {token} has no {cam} image; it '
-                                 f'has {sorted(results["images"])}')
-            info = results['images'][cam]
-            path = info['img_path']
-            raw = _read_bytes(path, f'{cam} image of sample {token}',
-                              self.backend_args)
-            img = mmcv.imfrombytes(raw, flag=self.color_type)
-            if img is None:
-                raise ValueError(f'{cam} image of sample {token} cannot be '
-                                 f'decoded: {path}')
-            if imgs and img.shape != imgs[0].shape:
-                raise ValueError(
-                    f'{cam} image {path} has shape {img.shape}, expected '
-                    f'{imgs[0].shape} like {paths[0]}')
-            imgs.append(img.astype(np.float32) if self.to_float32 else img)
-            paths.append(path)
-            for key in mats:
-                mats[key].append(_pad44(info[key]))
-        results['img'] = imgs
-        results['img_path'] = paths
-        results['cam_names'] = cams
-        results['num_views'] = len(cams)
-        shape = imgs[0].shape[:2] if imgs else (0, 0)
-        results['ori_shape'] = results['img_shape'] = shape
-        results['pad_shape'] = shape
-        for key, value in mats.items():
-            results[key] = np.stack(value) if value else np.zeros((0, 4, 4))
-        results['img_aug_matrix'] = np.tile(np.eye(4), (len(cams), 1, 1))
-        refresh_lidar2img(results)
-        return results
-
-    def __repr__(self) -> str:
-        """str: The transform and its arguments."""
-        return (f'{self.__class__.__name__}(cam_names={self.cam_names}, '
-                f'to_float32={self.to_float32}, '
-                f'color_type={self.color_type!r})')
 
 
 @TRANSFORMS.register_module()
@@ -171,11 +69,14 @@ class LoadOccupancyGT(BaseTransform):
         self.ignore_index = ignore_index
 
     def _surroundocc(self, raw: bytes, path: str, grid) -> dict:
+        if not raw:
+            raise ValueError(f'SurroundOcc label {path} is empty (0 bytes)')
         try:
             arr = np.load(io.BytesIO(raw), allow_pickle=False)
-        except ValueError as err:
-            raise ValueError(f'SurroundOcc label {path} is not a .npy array '
-                             f'({err})') from None
+        except Exception as err:  # noqa: BLE001 - EOFError, ValueError ...
+            raise ValueError(
+                f'SurroundOcc label {path} is truncated or not a .npy array '
+                f'({type(err).__name__}: {err})') from None
         if arr.ndim != 2 or arr.shape[1] != 4 \
                 or not np.issubdtype(arr.dtype, np.integer):
             raise ValueError(
@@ -196,12 +97,15 @@ class LoadOccupancyGT(BaseTransform):
         return dict(gt_occ=gt)
 
     def _occ3d(self, raw: bytes, path: str, grid) -> dict:
+        if not raw:
+            raise ValueError(f'Occ3D label {path} is empty (0 bytes)')
         try:
             npz = np.load(io.BytesIO(raw), allow_pickle=False)
             arrays = {k: npz[k] for k in npz.files}
-        except (ValueError, OSError) as err:
-            raise ValueError(f'Occ3D label {path} is not an .npz archive '
-                             f'({err})') from None
+        except Exception as err:  # noqa: BLE001 - BadZipFile (CRC), EOF ...
+            raise ValueError(
+                f'Occ3D label {path} is truncated, corrupt or not an .npz '
+                f'archive ({type(err).__name__}: {err})') from None
         out = {}
         for key in ('semantics', 'mask_lidar', 'mask_camera'):
             if key not in arrays:
@@ -249,7 +153,7 @@ class LoadOccupancyGT(BaseTransform):
             raise ValueError(
                 f'sample {results.get("token", "?")} has no {fmt} occupancy '
                 f'label in {results.get("ann_file", "its info file")}')
-        raw = _read_bytes(path, f'{fmt} occupancy label', None)
+        raw = read_bytes(path, f'{fmt} occupancy label', None)
         grid = np.asarray(spec.grid_size)
         loaded = self._surroundocc(raw, path, grid) if fmt == 'surroundocc' \
             else self._occ3d(raw, path, grid)
@@ -309,7 +213,7 @@ class LoadLidarSegLabels(BaseTransform):
             raise ValueError(
                 f'sample {results.get("token", "?")} has no lidarseg label in'
                 f' {results.get("ann_file", "its info file")}')
-        raw = _read_bytes(path, 'lidarseg label', self.backend_args)
+        raw = read_bytes(path, 'lidarseg label', self.backend_args)
         labels = lidarseg_to_occ16(np.frombuffer(raw, np.uint8), path)
         if 'points' in results and len(labels) != len(results['points']):
             raise ValueError(

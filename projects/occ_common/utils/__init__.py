@@ -1,7 +1,15 @@
 """Utilities of the occupancy plugins."""
-from .safe_checkpoint import (CHECKPOINT_SAFE_GLOBALS, UnsafeCheckpointError,
-                              load_weights_only)
+from .safe_pickle import (CHECKPOINT_GLOBALS, INFO_GLOBALS, CorruptFileError,
+                          RefusedGlobalError, UnsafeCheckpointError,
+                          install_checkpoint_loader, load_checkpoint_file,
+                          load_info_file)
+
+#: The name of :func:`load_checkpoint_file` in earlier versions.
+load_weights_only = load_checkpoint_file
 
 __all__ = [
-    'CHECKPOINT_SAFE_GLOBALS', 'UnsafeCheckpointError', 'load_weights_only'
+    'CHECKPOINT_GLOBALS', 'CorruptFileError', 'INFO_GLOBALS',
+    'RefusedGlobalError', 'UnsafeCheckpointError',
+    'install_checkpoint_loader', 'load_checkpoint_file', 'load_info_file',
+    'load_weights_only'
 ]

@@ -3,11 +3,9 @@
 Each test damages its own copy of one tiny converted world (one scene, two
 key frames) and checks the error message names the damaged file.
 """
-import importlib.util
 import os
 import os.path as osp
 import re
-import shutil
 
 import mmengine
 import numpy as np
@@ -18,7 +16,7 @@ from mmengine.config import Config
 
 import projects.occ_common  # noqa: F401  (registers)
 from projects.occ_common.datasets.info_format import INFO_VERSION
-from projects.occ_common.testing.tiny_world import make_tiny_world
+from projects.occ_common.testing.tool_logs import run_create_data
 
 register_all_modules(init_default_scope=True)
 ONE_SCENE = pytest.mark.filterwarnings(
@@ -28,28 +26,13 @@ TRAIN = 'nuscenes_occ_infos_train.pkl'
 
 
 def create_data(*argv):
-    spec = importlib.util.spec_from_file_location(
-        'create_data', osp.join(REPO, 'tools', 'create_data.py'))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.main(['nuscenes', '--version', 'v1.0-mini', *argv])
-
-
-@pytest.fixture(scope='module')
-def world(tmp_path_factory):
-    """A converted one-scene world (the scene is both train and val)."""
-    root = make_tiny_world(str(tmp_path_factory.mktemp('bad_world')))
-    with pytest.warns(UserWarning, match='one scene'):
-        create_data('--root-path', root)
-    return root
+    return run_create_data('--version', 'v1.0-mini', *argv)
 
 
 @pytest.fixture
-def root(world, tmp_path):
-    """A private copy of the world to damage."""
-    copy = str(tmp_path / 'world')
-    shutil.copytree(world, copy)
-    return copy
+def root(world_copy):
+    """A private copy of the converted one-scene world to damage."""
+    return world_copy
 
 
 def dataset(root, fmt='surroundocc'):
@@ -184,3 +167,115 @@ def test_converter_never_overwrites(root):
     with pytest.warns(UserWarning, match='one scene'):
         written = create_data('--root-path', root, '--overwrite')
     assert sorted(written) == ['train', 'val', 'val_night', 'val_rainy']
+
+
+def _damage(path, how):
+    """Empty, truncate to 40 % or flip one bit in the middle of a file."""
+    with open(path, 'rb') as f:
+        data = bytearray(f.read())
+    if how == 'empty':
+        data = b''
+    elif how == 'truncated':
+        data = data[:len(data) * 2 // 5]
+    else:
+        data[len(data) // 2] ^= 0x10
+    with open(path, 'wb') as f:
+        f.write(data)
+
+
+@pytest.mark.parametrize('fmt, how, msg', [
+    ('occ3d', 'empty', 'is empty'),
+    ('occ3d', 'truncated', 'is truncated, corrupt'),
+    ('occ3d', 'bitflip', 'is truncated, corrupt .*CRC'),
+    ('surroundocc', 'empty', 'is empty'),
+    ('surroundocc', 'truncated', 'is truncated or not a .npy'),
+])
+def test_damaged_label_file_names_it(root, fmt, how, msg):
+    """Empty / cut / bit-flipped labels: ValueError naming the file.
+
+    These raised BadZipFile, EOFError or zlib errors without a file name.
+    A bit flip in an (uncompressed) .npz fails its member's CRC-32.
+    """
+    path = osp.join(root, first_info(root)[f'occ_{fmt}_path'])
+    _damage(path, how)
+    with pytest.raises(ValueError, match=re.escape(path) + ' ' + msg):
+        dataset(root, fmt)[0]
+
+
+def _image(root, cam='CAM_FRONT', sample=0):
+    info = mmengine.load(osp.join(root, TRAIN))['data_list'][sample]
+    return osp.join(root, info['images'][cam]['img_path'])
+
+
+@pytest.mark.parametrize('how, msg', [
+    ('empty', 'is empty \\(0 bytes\\)'),
+    ('truncated', 'is a truncated JPEG .*no end-of-image marker'),
+])
+def test_empty_or_truncated_jpeg_names_it(root, how, msg):
+    """OpenCV raised cv2.error on an empty JPEG and decoded one cut to
+    40 % with its bottom rows black."""
+    path = _image(root)
+    _damage(path, how)
+    with pytest.raises(ValueError, match=f'CAM_FRONT image of sample .* '
+                       f'{msg}.*: {re.escape(path)}'):
+        dataset(root)[0]
+
+
+REAL_SAMPLE = osp.join(REPO, '..', 'shared', 'data', 'nuscenes_real_sample')
+
+
+@pytest.mark.skipif(not osp.isdir(REAL_SAMPLE),
+                    reason='../shared/data/nuscenes_real_sample is absent')
+def test_real_jpegs_pass_the_completeness_check():
+    """The six real nuScenes images end with their end-of-image marker."""
+    from projects.occ_common.transforms.image_loading import \
+        check_complete_image
+    names = [n for n in os.listdir(REAL_SAMPLE) if n.endswith('.jpg')]
+    assert len(names) == 6
+    for name in names:
+        with open(osp.join(REAL_SAMPLE, name), 'rb') as f:
+            raw = f.read()
+        check_complete_image(raw, name, name)
+        with pytest.raises(ValueError, match='truncated JPEG'):
+            check_complete_image(raw[:len(raw) * 2 // 5], name, name)
+
+
+def _shrink_images(root, sample=0):
+    """Resize every view of a sample to half its size (80x45)."""
+    import cv2
+    info = mmengine.load(osp.join(root, TRAIN))['data_list'][sample]
+    for cam in info['images']:
+        path = osp.join(root, info['images'][cam]['img_path'])
+        img = cv2.imread(path)
+        cv2.imwrite(path, cv2.resize(img, (80, 45)))
+
+
+def test_image_of_another_size_than_its_calibration(root):
+    """160x90 calibration, 80x45 images: an error naming both sizes;
+    ``scale_calibration=True`` halves the focal lengths and principal
+    point instead (pixel i covers [i, i + 1), so u' = u / 2)."""
+    from projects.occ_common.transforms import LoadMultiViewImagesOcc
+    _shrink_images(root)
+    ds = dataset(root)
+    info = ds.get_data_info(0)
+    with pytest.raises(ValueError, match='CAM_FRONT: image .* is 80x45, '
+                       'but its calibration \\(cam2img\\) is for 160x90'):
+        LoadMultiViewImagesOcc()(dict(info))
+    results = LoadMultiViewImagesOcc(scale_calibration=True)(dict(info))
+    k = np.asarray(info['images']['CAM_FRONT']['cam2img'])[:3, :3]
+    assert np.allclose(results['cam2img'][0][:3, :3],
+                       np.diag([0.5, 0.5, 1.0]) @ k)
+    assert results['img'][0].shape == (45, 80, 3)
+
+
+def test_image_size_without_recorded_size_checks_the_principal_point(root):
+    """An info file without height / width: the principal point (80, 45)
+    of a 160x90 calibration lies at the corner of an 80x45 image."""
+    from projects.occ_common.transforms import LoadMultiViewImagesOcc
+    _shrink_images(root)
+    info = dataset(root).get_data_info(0)
+    for image in info['images'].values():
+        del image['height'], image['width']
+    with pytest.raises(ValueError, match='principal point .* is not in the '
+                       'middle of the 80x45 image'):
+        LoadMultiViewImagesOcc()(info)

@@ -7,7 +7,8 @@ import torch
 from mmengine.fileio import get_file_backend
 from mmengine.runner.checkpoint import save_checkpoint
 
-from projects.occ_common.hooks import AtomicLocalBackend, atomic_write
+from projects.occ_common.hooks import (AtomicLocalBackend, atomic_write,
+                                       register_atomic_backend)
 from projects.occ_common.hooks.atomic_file_backend import is_temporary_file
 
 BACKEND_ARGS = dict(backend='atomic_local')
@@ -73,8 +74,11 @@ def test_mmengine_save_checkpoint_goes_through_the_backend(
     mmengine 0.10.7: CheckpointHook -> Runner.save_checkpoint ->
     mmengine.runner.checkpoint.save_checkpoint(..., backend_args) ->
     get_file_backend(filename, backend_args).put. A failing write there
-    must leave the previous checkpoint loadable.
+    must leave the previous checkpoint loadable. The backend is registered
+    explicitly (SafeCheckpointHook does it), never on import.
     """
+    register_atomic_backend()
+    register_atomic_backend()  # idempotent
     assert isinstance(
         get_file_backend(str(tmp_path), backend_args=BACKEND_ARGS),
         AtomicLocalBackend)

@@ -3,9 +3,9 @@ import cv2
 import numpy as np
 import pytest
 
-from projects.occ_common.transforms.loading import (LoadLidarSegLabels,
-                                                    LoadMultiViewImagesOcc,
-                                                    LoadOccupancyGT)
+from projects.occ_common.transforms import (LoadLidarSegLabels,
+                                            LoadMultiViewImagesOcc,
+                                            LoadOccupancyGT)
 
 K = [[2.0, 0.0, 3.0], [0.0, 2.0, 2.0], [0.0, 0.0, 1.0]]
 

@@ -10,13 +10,15 @@ mapping column vectors: ``p_cam = lidar2cam @ p_lidar``.
 Splits:
     * ``v1.0-trainval``: ``train`` / ``val`` of ``nuscenes.utils.splits``.
     * ``v1.0-mini``: ``mini_train`` / ``mini_val``.
+    * ``v1.0-test``: ``test`` (of a synthetic world: all its scenes).
     * Synthetic worlds (recognised by the generator's
       ``synthetic_gt/meta.json`` under the root): the last
       ``max(1, n_scenes // 5)`` scenes in name order are ``val``, the others
       ``train``; a one-scene world uses its scene for both.
     * ``val_scenes`` overrides any of these (all other scenes are train).
     ``val_rainy`` / ``val_night`` are the ``val`` samples whose scene
-    description mentions rain / night.
+    description mentions rain / night. A ``train``, ``val`` or ``test``
+    split without any scene is an error naming the scenes there are.
 
 Every file an info links (key frame, sweeps, images, lidarseg labels,
 occupancy labels) is checked to exist; an occupancy label folder that does
@@ -145,6 +147,10 @@ def _images(ctx: _Context, sample: dict, global2lidar: np.ndarray,
         viewpad[:3, :3] = cam2img
         images[cam] = dict(
             img_path=_rel(path, ctx.root),
+            # The image size the intrinsics belong to: the loader refuses
+            # an image of another size (or rescales cam2img if asked).
+            height=int(sd['height']),
+            width=int(sd['width']),
             cam2img=cam2img.tolist(),
             lidar2cam=lidar2cam.tolist(),
             cam2ego=pose_matrix(cs).tolist(),
@@ -260,6 +266,11 @@ def split_scenes(scene_names: Sequence[str],
         dict[str, list[str]]: ``train`` and ``val`` (or only ``test``).
     """
     names = sorted(scene_names)
+    if version == 'v1.0-test' and (synthetic or val_scenes is not None):
+        if val_scenes is not None:
+            raise ValueError('--val-scenes does not apply to v1.0-test, '
+                             'whose scenes are all test scenes')
+        return dict(test=names)
     if val_scenes is not None:
         unknown = sorted(set(val_scenes) - set(names))
         if unknown:
@@ -343,12 +354,27 @@ def create_nuscenes_occ_infos(root_path: str,
                           'paths are recorded as None')
             folder = None
         label_roots.append(folder)
+    if not osp.isdir(osp.join(root_path, version)):
+        found = sorted(d for d in os.listdir(root_path)
+                       if d.startswith('v1.0')) if osp.isdir(root_path) \
+            else []
+        raise FileNotFoundError(
+            f'{osp.join(root_path, version)} not found: {root_path} holds '
+            f'the nuScenes versions {found}; pass one with --version.')
     _check_lidarseg_files(root_path, version)
     nusc = NuScenes(version=version, dataroot=root_path, verbose=False)
     ctx = _Context(nusc, root_path, *label_roots, max_sweeps)
     scenes = {s['name']: s for s in nusc.scene}
     synthetic = is_synthetic_root(root_path)
     splits = split_scenes(list(scenes), version, val_scenes, synthetic)
+    empty = [split for split, names in splits.items() if not names]
+    if empty:
+        raise ValueError(
+            f'{root_path} ({version}): the {" and ".join(empty)} split '
+            f'would hold no sample. The database has the scenes '
+            f'{sorted(scenes)}; the splits are {splits}. Check --version '
+            '(its official splits list other scenes), or choose the val '
+            'scenes with --val-scenes.')
     data = {}
     for split, names in splits.items():
         entries = []

@@ -59,7 +59,8 @@ class DepthBCELoss(nn.Module):
 
         Returns:
             Tensor: Scalar loss; zero (with zero gradients) when no pixel
-            has a target.
+            has a target, NaN when a prediction with a target is NaN or
+            infinite (for the non-finite loss guard to name).
         """
         if depth_pred.dim() != 4 or depth_pred.shape[1] != self.num_bins:
             raise ValueError(
@@ -78,12 +79,22 @@ class DepthBCELoss(nn.Module):
                                       self.depth_bound)
         pred = depth_pred.float().permute(0, 2, 3, 1).reshape(
             -1, self.num_bins)
+        picked = pred[valid]
+        # Non-finite probabilities (a diverging step, or NaN inputs) would
+        # make BCE raise ("all elements of input should be between 0 and
+        # 1"; a device assert on CUDA). BCE gets a stand-in of 0.5 there
+        # and the loss becomes NaN, which NonFiniteLossHook reports with
+        # the iteration and this term's name. No host sync is needed.
+        finite = torch.isfinite(picked)
+        safe = torch.where(finite, picked, torch.full_like(picked, 0.5))
         # Over an empty selection the sum is a connected zero, so the
         # no-LiDAR batch needs no special case. CUDA autocast refuses
         # binary_cross_entropy outright (``--amp``), so it runs outside it,
         # in float32, as BEVDepth does.
         with torch.autocast(device_type=pred.device.type, enabled=False):
             bce = F.binary_cross_entropy(
-                pred[valid], target[valid], reduction='none').sum()
+                safe.clamp(0.0, 1.0), target[valid], reduction='none').sum()
         loss = bce / valid.sum().clamp(min=1)
+        loss = torch.where(finite.all(), loss,
+                           torch.full_like(loss, float('nan')))
         return self.loss_weight * loss

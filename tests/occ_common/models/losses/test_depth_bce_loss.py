@@ -36,6 +36,26 @@ def test_depth_loss_hand_computed():
     assert torch.equal(pred.grad[0, :, 0, 1], torch.zeros(4))
 
 
+@pytest.mark.parametrize('bad', [float('nan'), float('inf')])
+def test_non_finite_prediction_gives_nan_not_a_crash(bad):
+    """A diverged depth net: BCE raised "all elements of input should be
+    between 0 and 1"; now the loss is NaN (for NonFiniteLossHook to name)
+    and backward stays finite. A bad value at a pixel without a target
+    changes nothing."""
+    pred = torch.full((1, 4, 2, 2), 0.25)
+    loss_fn = DepthBCELoss(depth_bound=BOUND, downsample=2)
+    good = loss_fn(pred, patch_depth_map())
+    untargeted = pred.clone()
+    untargeted[0, :, 0, 1] = bad  # feature pixel (0, 1) has no return
+    assert loss_fn(untargeted, patch_depth_map()).item() == good.item()
+    pred[0, 2, 1, 1] = bad  # feature pixel (1, 1) has one
+    pred.requires_grad_()
+    loss = loss_fn(pred, patch_depth_map())
+    assert torch.isnan(loss)
+    loss.backward()
+    assert torch.isfinite(pred.grad).all()
+
+
 def test_no_lidar_is_finite_zero():
     """No LiDAR return anywhere: 0 with zero gradients."""
     pred = torch.full((2, 4, 2, 2), 0.25, requires_grad=True)
@@ -97,7 +117,8 @@ def test_depth_loss_under_cuda_autocast():
     pred = _hand_case().cuda().half().requires_grad_()
     with torch.autocast('cuda', dtype=torch.float16):
         loss = DepthBCELoss(
-            depth_bound=BOUND, downsample=2)(pred, patch_depth_map().cuda())
+            depth_bound=BOUND,
+            downsample=2)(pred, patch_depth_map().cuda())
     assert loss.item() == pytest.approx(5.4534523, abs=1e-5)
     loss.backward()
     assert torch.isfinite(pred.grad).all()

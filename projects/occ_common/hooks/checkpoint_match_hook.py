@@ -1,0 +1,115 @@
+"""Refuse to evaluate a checkpoint that is not this model's.
+
+mmengine loads a checkpoint non-strictly and only logs the mismatched keys
+(among ~1,100 log lines): a checkpoint of the other model evaluated with
+exit code 0 and the metric of a randomly initialised model, and an all-NaN
+checkpoint evaluated too. ``tools/test.py`` adds this hook, which checks
+the checkpoint when the Runner has loaded it and before it is copied into
+the model, on every rank alike (mmengine's own strict mode raises on rank 0
+only and leaves the other ranks waiting).
+"""
+import re
+from typing import Dict, List
+
+from mmdet3d.registry import HOOKS
+from mmengine.hooks import Hook
+from mmengine.model import is_model_wrapper
+
+from ..utils.safe_pickle import install_checkpoint_loader
+from .non_finite_loss_hook import non_finite_tensors
+
+
+def _examples(items: List[str], count: int = 3) -> str:
+    shown = ', '.join(items[:count])
+    return shown + (f', ... ({len(items)} in all)'
+                    if len(items) > count else '')
+
+
+def state_dict_mismatch(model_state: Dict,
+                        checkpoint_state: Dict) -> List[str]:
+    """How a checkpoint's state dict differs from a model's.
+
+    Args:
+        model_state (dict): ``model.state_dict()``.
+        checkpoint_state (dict): The checkpoint's ``state_dict``, with any
+            ``module.`` prefix removed.
+
+    Returns:
+        list[str]: One sentence per kind of difference (missing keys,
+        unexpected keys, other shapes); empty if they match. BatchNorm's
+        ``num_batches_tracked`` may be missing, as mmengine allows.
+    """
+    missing = [
+        k for k in model_state
+        if k not in checkpoint_state and not k.endswith('num_batches_tracked')
+    ]
+    unexpected = [k for k in checkpoint_state if k not in model_state]
+    shapes = [
+        f'{k} {tuple(checkpoint_state[k].shape)} vs '
+        f'{tuple(model_state[k].shape)}' for k in model_state
+        if k in checkpoint_state and hasattr(checkpoint_state[k], 'shape')
+        and tuple(checkpoint_state[k].shape) != tuple(model_state[k].shape)
+    ]
+    found = []
+    if missing:
+        found.append(f'{len(missing)} of the model\'s {len(model_state)} '
+                     f'tensors are missing ({_examples(missing)})')
+    if unexpected:
+        found.append(f'{len(unexpected)} keys are not the model\'s '
+                     f'({_examples(unexpected)})')
+    if shapes:
+        found.append(f'{len(shapes)} tensors have another shape '
+                     f'(checkpoint vs model: {_examples(shapes)})')
+    return found
+
+
+@HOOKS.register_module()
+class CheckpointMatchHook(Hook):
+    """Check the loaded checkpoint against the model before it is used.
+
+    ``before_run`` installs the restricted checkpoint loader (so that
+    ``tools/test.py`` loads restrictedly even with a config that lacks
+    ``WeightsOnlyCheckpointHook``).
+
+    Args:
+        allow_key_mismatch (bool): Only refuse non-finite weights, accept
+            missing, unexpected and reshaped keys (mmengine's behaviour).
+            Defaults to False.
+    """
+
+    priority = 'VERY_HIGH'
+
+    def __init__(self, allow_key_mismatch: bool = False) -> None:
+        self.allow_key_mismatch = allow_key_mismatch
+
+    def before_run(self, runner) -> None:
+        """Install the restricted loader before anything is loaded."""
+        install_checkpoint_loader()
+
+    def after_load_checkpoint(self, runner, checkpoint: dict) -> None:
+        """Refuse NaN / inf weights and, unless allowed, other keys.
+
+        Raises:
+            ValueError: Naming the checkpoint and what is wrong.
+        """
+        source = runner.cfg.get('load_from') or 'the checkpoint'
+        state = checkpoint.get('state_dict', checkpoint)
+        bad = non_finite_tensors(state)
+        if bad:
+            raise ValueError(
+                f'{source} holds non-finite weights: {_examples(bad)}. It '
+                'is the checkpoint of a diverged run; evaluate the last good'
+                ' one instead.')
+        if self.allow_key_mismatch:
+            return
+        model = runner.model.module if is_model_wrapper(
+            runner.model) else runner.model
+        state = {re.sub(r'^module\.', '', k): v for k, v in state.items()}
+        found = state_dict_mismatch(model.state_dict(), state)
+        if found:
+            raise ValueError(
+                f'{source} does not fit the model of '
+                f'{runner.cfg.filename}: {"; ".join(found)}. Evaluating it '
+                'would report a partly random model. Check the config and '
+                'the checkpoint, or pass --allow-key-mismatch to evaluate '
+                'anyway.')

@@ -1,0 +1,227 @@
+"""Checks of a config and its ``--cfg-options`` before a Runner is built.
+
+mmengine accepts any top-level key and any override: a typo such as
+``tset_dataloader`` is silently ignored (the run uses the base config's
+``test_dataloader``), ``--cfg-options train_cfg.max_epochs`` (no ``=``)
+crashes inside argparse with ``not enough values to unpack``, and
+``train_cfg.max_epochs=two`` fails deep in the training loop. The tools
+run these checks first:
+
+* :class:`CfgOptionsAction`: every ``--cfg-options`` item is
+  ``KEY=VALUE`` with a non-empty key and a parsable value.
+* :func:`check_cfg_options`: an override of a value the config already
+  has keeps its kind (bool, integer, number, string, list / tuple);
+  ``None`` on either side and new keys are not checked. A number given
+  for a string is taken as the text typed (``data_root=2024``).
+* :func:`check_top_level_keys`: **the rule for unknown keys** is that a
+  top-level key is an error when it is not read by mmengine's Runner or
+  tools but lies within two edits (insert, delete, substitute, swap of
+  neighbours; one edit for keys of up to six letters) of one that is.
+  Configs keep any other key of their own (``point_cloud_range``,
+  ``train_pipeline``, ...), since configs name their shared values at the
+  top level by design; a real typo of a Runner key is almost always one or
+  two keystrokes away from it. Keys starting with ``_`` are never checked.
+"""
+import inspect
+from typing import Any, Dict, Iterable, List, Mapping, Optional
+
+from mmengine.config import DictAction
+
+#: Top-level keys mmengine 0.10.7 and the tools read besides the
+#: arguments of ``Runner.__init__``.
+EXTRA_RUNNER_KEYS = frozenset({
+    'custom_imports', 'runner_type', 'model_wrapper_cfg', 'compile',
+    'activation_checkpointing', 'efficient_conv_bn_eval', 'sync_bn',
+    'find_unused_parameters', 'gpu_ids', 'dist_params', 'tta_model',
+    'tta_pipeline', 'strategy', 'work_dir', 'launcher', 'auto_scale_lr'
+})
+
+
+def runner_keys() -> frozenset:
+    """Top-level keys the Runner (and the tools) read."""
+    from mmengine.runner import Runner
+    params = inspect.signature(Runner.__init__).parameters
+    # ``cfg`` is the whole config, never a key of it.
+    return frozenset(set(params) - {'self', 'cfg'}) | EXTRA_RUNNER_KEYS
+
+
+def edit_distance(a: str, b: str) -> int:
+    """Optimal string alignment distance (a swap of neighbours costs 1).
+
+    Args:
+        a (str): A string.
+        b (str): Another string.
+
+    Returns:
+        int: The number of edits turning ``a`` into ``b``.
+    """
+    rows = [[0] * (len(b) + 1) for _ in range(len(a) + 1)]
+    for i in range(len(a) + 1):
+        rows[i][0] = i
+    for j in range(len(b) + 1):
+        rows[0][j] = j
+    for i in range(1, len(a) + 1):
+        for j in range(1, len(b) + 1):
+            cost = int(a[i - 1] != b[j - 1])
+            rows[i][j] = min(rows[i - 1][j] + 1, rows[i][j - 1] + 1,
+                             rows[i - 1][j - 1] + cost)
+            if i > 1 and j > 1 and a[i - 1] == b[j - 2] \
+                    and a[i - 2] == b[j - 1]:
+                rows[i][j] = min(rows[i][j], rows[i - 2][j - 2] + 1)
+    return rows[-1][-1]
+
+
+def check_top_level_keys(keys: Iterable[str], filename: str) -> None:
+    """Refuse top-level keys that are typos of Runner keys.
+
+    Args:
+        keys (Iterable[str]): The config's top-level keys.
+        filename (str): The config file, for the message.
+
+    Raises:
+        ValueError: Naming each suspect key and the key it resembles.
+    """
+    known = runner_keys()
+    suspects = {}
+    for key in keys:
+        if key in known or key.startswith('_'):
+            continue
+        close = sorted(k for k in known
+                       if edit_distance(key, k) <= (1 if len(k) <= 6 else 2))
+        if close:
+            suspects[key] = close[0]
+    if suspects:
+        listed = ', '.join(f'{key!r} (did you mean {near!r}?)'
+                           for key, near in sorted(suspects.items()))
+        raise ValueError(
+            f'{filename}: unknown top-level key {listed}. mmengine ignores '
+            'such a key, so the run would silently use the base config '
+            'instead. Rename it; a variable of your own must not lie '
+            'within two edits of a Runner key.')
+
+
+class CfgOptionsAction(DictAction):
+    """``--cfg-options`` parser that names a malformed item.
+
+    Records the raw text of each value in ``namespace.<dest>_raw``.
+    """
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        """Parse ``KEY=VALUE`` items (see ``mmengine.config.DictAction``)."""
+        raw = dict(getattr(namespace, f'{self.dest}_raw', None) or {})
+        for item in values or ():
+            key, sep, val = item.partition('=')
+            if not sep or not key:
+                parser.error(f'{option_string}: expected KEY=VALUE, got '
+                             f'{item!r}')
+            try:
+                self._parse_iterable(val)
+            except (AssertionError, ValueError) as err:
+                parser.error(f'{option_string}: cannot parse the value of '
+                             f'{item!r} ({err})')
+            raw[key] = val.strip('\'"')
+        super().__call__(parser, namespace, values, option_string)
+        setattr(namespace, f'{self.dest}_raw', raw)
+
+
+_MISSING = object()
+
+
+def _lookup(cfg: Mapping, key: str) -> Any:
+    """The value at dotted ``key`` (list items by index), or _MISSING."""
+    node: Any = cfg
+    for part in key.split('.'):
+        if isinstance(node, (list, tuple)) and part.isdigit() \
+                and int(part) < len(node):
+            node = node[int(part)]
+        elif hasattr(node, 'keys') and part in node:  # Config, ConfigDict
+            node = node[part]
+        else:
+            return _MISSING
+    return node
+
+
+def _kind(value: Any) -> Optional[str]:
+    """The kind an override must keep, or None (no check)."""
+    if isinstance(value, bool):
+        return 'bool'
+    if isinstance(value, int):
+        return 'integer'
+    if isinstance(value, float):
+        return 'number'
+    if isinstance(value, str):
+        return 'string'
+    if isinstance(value, (list, tuple)):
+        return 'list'
+    return None
+
+
+def _fits(kind: str, value: Any) -> bool:
+    if kind == 'number':
+        return isinstance(value, (int, float)) and not isinstance(value, bool)
+    return _kind(value) == kind
+
+
+def check_cfg_options(cfg: Mapping,
+                      options: Dict[str, Any],
+                      raw: Optional[Dict[str, str]] = None) -> Dict:
+    """Check that overrides keep the kind of the values they replace.
+
+    Args:
+        cfg (Mapping): The config before the overrides.
+        options (dict): Parsed ``--cfg-options``.
+        raw (dict, optional): The typed text of each value
+            (:class:`CfgOptionsAction`).
+
+    Returns:
+        dict: ``options``, with numbers given for strings as typed.
+
+    Raises:
+        ValueError: Naming each override of the wrong kind.
+    """
+    raw = raw or {}
+    checked, errors = dict(options), []
+    for key, value in options.items():
+        old = _lookup(cfg, key)
+        kind = None if old is _MISSING or old is None else _kind(old)
+        if kind is None or value is None or _fits(kind, value):
+            continue
+        if kind == 'string' and _kind(value) in ('bool', 'integer',
+                                                 'number'):
+            checked[key] = raw.get(key, str(value))
+            continue
+        errors.append(f'{key}={raw.get(key, value)!r} (a '
+                      f'{_kind(value) or type(value).__name__}), but the '
+                      f'config has the {kind} {old!r} there')
+    if errors:
+        raise ValueError('--cfg-options of the wrong kind: ' +
+                         '; '.join(errors))
+    return checked
+
+
+def apply_cfg_options(cfg, args, dest: str = 'cfg_options') -> List[str]:
+    """Check and merge ``args.<dest>`` into ``cfg``; check the top level.
+
+    Args:
+        cfg (mmengine.Config): The loaded config.
+        args (argparse.Namespace): Parsed with :class:`CfgOptionsAction`.
+        dest (str): The option's attribute. Defaults to 'cfg_options'.
+
+    Returns:
+        list[str]: The overridden keys.
+    """
+    check_top_level_keys(cfg.keys(), cfg.filename or '<config>')
+    options = getattr(args, dest, None)
+    if not options:
+        return []
+    options = check_cfg_options(cfg, options,
+                                getattr(args, f'{dest}_raw', None))
+    cfg.merge_from_dict(options)
+    check_top_level_keys(cfg.keys(), f'--{dest.replace("_", "-")}')
+    return sorted(options)
+
+
+__all__ = [
+    'CfgOptionsAction', 'apply_cfg_options', 'check_cfg_options',
+    'check_top_level_keys', 'edit_distance', 'runner_keys'
+]

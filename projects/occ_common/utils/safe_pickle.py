@@ -1,0 +1,464 @@
+"""Restricted unpickling of every pickle the library reads.
+
+Info files are what users download from other people, and checkpoints come
+from model zoos; a plain pickle of either can run any code when it is
+loaded. Both are read here with unpicklers that resolve only an explicit
+list of globals (``module.name`` pairs, checked *before* anything is
+imported) and refuse anything else by name, so nothing from a refused file
+is executed:
+
+* **Info files** (:func:`load_info_file`): builtin containers and scalars
+  and numpy arrays, scalars and dtypes, which is all the converter (and
+  mmdet3d's own info files) write. Python's C unpickler with a restricted
+  ``find_class``: every object it can reach is a builtin or numpy C type,
+  whose state an attacker cannot rewrite, so it keeps the C speed (info
+  files of a full dataset are large).
+* **Checkpoints** (:func:`load_checkpoint_file`): ``torch.load(...,
+  weights_only=False, pickle_module=CHECKPOINT_PICKLE)`` with the info-file
+  list plus torch's tensor / storage rebuild functions, ``torch.Size``,
+  dtypes, ``collections.OrderedDict`` and mmengine's ``HistoryBuffer``
+  (the message hub of a Runner checkpoint). The same call works on torch
+  2.0 ... 2.13 and on both of torch's file formats (zip and legacy), unlike
+  ``torch.serialization.add_safe_globals`` (torch >= 2.4). This unpickler
+  is pickle's pure-Python one, because it must also restrict ``BUILD``
+  (setting an object's state) to numpy arrays / dtypes, ``HistoryBuffer``
+  instances and ``OrderedDict`` (a state dict's ``_metadata``): the
+  Python functions on the list must not have their attributes rewritten.
+  A checkpoint pickle holds only the structure (tensor data lies in
+  separate records), so this costs little.
+
+A Runner checkpoint written by plain mmengine (every zoo checkpoint of
+OpenMMLab) pickles the statistics methods of its ``HistoryBuffer``\\ s as
+``builtins.getattr(HistoryBuffer, 'min')``. ``getattr`` is therefore
+allowed with exactly that object and the statistic names ``HistoryBuffer``
+registers, and with nothing else; the class-level registry of statistic
+methods, which ``HistoryBuffer.__setstate__`` updates from the file, is
+restored after every load, so a file cannot leave a method behind.
+"""
+import _compat_pickle
+import collections
+import contextlib
+import functools
+import importlib
+import io
+import os
+import os.path as osp
+import pickle
+import types
+import zipfile
+from typing import Any, Callable, Dict, Iterator, Optional, Union
+
+import numpy as np
+import torch
+
+
+class RefusedGlobalError(pickle.UnpicklingError):
+    """A pickle names a global outside the allow-list (nothing was run).
+
+    Args:
+        qualname (str): ``module.name`` of the refused global, or a
+            description of the refused operation.
+    """
+
+    def __init__(self, qualname: str) -> None:
+        super().__init__(qualname)
+        self.qualname = qualname
+
+
+def _numpy_core() -> str:
+    """``numpy._core`` (numpy 2) or ``numpy.core`` (numpy 1)."""
+    if np.lib.NumpyVersion(np.__version__) >= '2.0.0':
+        return 'numpy._core'
+    return 'numpy.core'
+
+
+# numpy 2 pickles name ``numpy._core``, numpy 1 ``numpy.core``: a file from
+# either loads under either (the objects are the same).
+_NUMPY_ALIASES = {
+    f'numpy.{core}.{module}': f'{_numpy_core()}.{module}'
+    for core in ('core', '_core') for module in ('multiarray', 'numeric')
+}
+
+#: Globals of an info file: builtin containers and scalars, numpy arrays,
+#: scalars and dtypes. ``_codecs.encode`` is how pickle protocol 2 writes
+#: ``bytes``, ``_frombuffer`` how protocol 5 writes arrays.
+INFO_GLOBALS = frozenset({
+    'builtins.set', 'builtins.frozenset', 'builtins.bytearray',
+    'builtins.complex', 'builtins.slice', '_codecs.encode',
+    'numpy.ndarray', 'numpy.dtype', f'{_numpy_core()}.multiarray._reconstruct',
+    f'{_numpy_core()}.multiarray.scalar',
+    f'{_numpy_core()}.numeric._frombuffer'
+})
+
+
+def _tensor_globals() -> frozenset:
+    """torch's rebuild functions of dense tensors and parameters."""
+    names = {
+        'torch._utils._rebuild_tensor', 'torch._utils._rebuild_tensor_v2',
+        'torch._utils._rebuild_tensor_v3', 'torch._utils._rebuild_parameter',
+        'torch._utils._rebuild_parameter_with_state',
+        'torch._tensor._rebuild_from_type_v2', 'torch.Size', 'torch.Tensor',
+        'torch.device', 'torch.nn.parameter.Parameter',
+        'collections.OrderedDict', 'collections.Counter'
+    }
+    # Only those this torch has (``_rebuild_tensor_v3``: torch >= 2.1).
+    return frozenset(
+        name for name in names
+        if hasattr(importlib.import_module(name.rsplit('.', 1)[0]),
+                   name.rsplit('.', 1)[1]))
+
+
+#: Globals of a checkpoint besides :data:`INFO_GLOBALS` (``Counter``: the
+#: milestones of mmengine's MultiStepLR state). Storage types
+#: (``torch.FloatStorage`` ...) never reach the allow-list: torch.load's
+#: own unpickler maps every name containing ``Storage`` to a dtype tag.
+#: ``builtins.getattr`` is allowed only as :func:`_history_buffer_getattr`.
+CHECKPOINT_GLOBALS = frozenset({
+    *_tensor_globals(), 'mmengine.logging.history_buffer.HistoryBuffer',
+    'builtins.getattr'
+})
+
+
+#: ``torch.float32`` ... by name, looked up without touching other names.
+_TORCH_DTYPES = {
+    name: value
+    for name, value in vars(torch).items() if isinstance(value, torch.dtype)
+}
+
+
+@functools.lru_cache(maxsize=1)
+def _history_buffer() -> type:
+    """mmengine's ``HistoryBuffer`` class, its default statistics
+    registered (the first instance registers them)."""
+    from mmengine.logging.history_buffer import HistoryBuffer
+    HistoryBuffer()
+    return HistoryBuffer
+
+
+def statistic_names() -> frozenset:
+    """Names of the statistics methods defined on ``HistoryBuffer``.
+
+    Returns:
+        frozenset[str]: The registered names that are functions of the
+        class itself (``min``, ``max``, ``current``, ``mean`` in mmengine
+        0.10.7).
+    """
+    buffer = _history_buffer()
+    return frozenset(
+        name for name, method in buffer._statistics_methods.items()
+        if vars(buffer).get(name) is method)
+
+
+def _history_buffer_getattr(obj: Any, name: str) -> Callable:
+    """``getattr`` of a zoo checkpoint: ``HistoryBuffer`` statistics only.
+
+    Raises:
+        RefusedGlobalError: For any other object or attribute name.
+    """
+    buffer = _history_buffer()
+    if obj is not buffer or name not in statistic_names():
+        what = getattr(obj, '__qualname__', type(obj).__qualname__)
+        raise RefusedGlobalError(
+            f'builtins.getattr({what}, {name!r}) (getattr is allowed only on'
+            f' HistoryBuffer and its statistics {sorted(statistic_names())})'
+        )
+    return getattr(obj, name)
+
+
+def _resolve(qualname: str) -> Any:
+    """The object of an allowed ``module.name`` (``builtins.getattr``: the
+    restricted one)."""
+    if qualname == 'builtins.getattr':
+        return _history_buffer_getattr
+    module, name = qualname.rsplit('.', 1)
+    return getattr(importlib.import_module(module), name)
+
+
+def _find_allowed(module: str,
+                  name: str,
+                  allowed: frozenset,
+                  torch_dtypes: bool = False) -> Any:
+    """``find_class`` of the restricted unpicklers.
+
+    Args:
+        module (str): Module named by the pickle.
+        name (str): Global named by the pickle.
+        allowed (frozenset): Allowed ``module.name`` strings.
+        torch_dtypes (bool): Also allow ``torch.<dtype>`` (``torch.float32``
+            ...). Defaults to False.
+
+    Returns:
+        The global.
+
+    Raises:
+        RefusedGlobalError: If it is not allowed; nothing was imported.
+    """
+    # Protocol 2 (torch.save's default) writes Python 2 names
+    # (``__builtin__``); map them as pickle does. A Python 3 name is never
+    # in these tables.
+    if (module, name) in _compat_pickle.NAME_MAPPING:
+        module, name = _compat_pickle.NAME_MAPPING[(module, name)]
+    module = _compat_pickle.IMPORT_MAPPING.get(module, module)
+    module = _NUMPY_ALIASES.get(module, module)
+    qualname = f'{module}.{name}'
+    if qualname in allowed:
+        return _resolve(qualname)
+    if module == 'numpy.dtypes' and name.endswith('DType'):
+        # numpy >= 1.25 dtype classes (Float64DType ...), rebuilt by BUILD.
+        found = getattr(importlib.import_module('numpy.dtypes'), name, None)
+        if isinstance(found, type) and issubclass(found, np.dtype):
+            return found
+    if module == 'torch' and torch_dtypes and name in _TORCH_DTYPES:
+        return _TORCH_DTYPES[name]
+    raise RefusedGlobalError(qualname)
+
+
+class InfoUnpickler(pickle.Unpickler):
+    """C unpickler resolving only :data:`INFO_GLOBALS`."""
+
+    def find_class(self, module: str, name: str) -> Any:
+        """Resolve an allowed global or raise :class:`RefusedGlobalError`."""
+        return _find_allowed(module, name, INFO_GLOBALS)
+
+
+@contextlib.contextmanager
+def _statistics_registry_restored() -> Iterator[None]:
+    """Undo what a loaded ``HistoryBuffer`` registers class-wide.
+
+    ``HistoryBuffer.__setstate__`` adds the file's ``statistics_methods``
+    to the class-level registry; only the class's own methods under their
+    own names are accepted, and the registry is restored either way.
+    """
+    registry = _history_buffer()._statistics_methods
+    before = dict(registry)
+    try:
+        yield
+        foreign = sorted(name for name, method in registry.items()
+                         if before.get(name) is not method)
+        if foreign:
+            raise RefusedGlobalError(
+                f'HistoryBuffer statistics methods {foreign} that are not '
+                'the methods of HistoryBuffer')
+    finally:
+        registry.clear()
+        registry.update(before)
+
+
+class CheckpointUnpickler(pickle._Unpickler):
+    """Pure-Python unpickler for checkpoints (see the module docstring).
+
+    Resolves :data:`INFO_GLOBALS` and :data:`CHECKPOINT_GLOBALS` and
+    applies ``BUILD`` only to numpy arrays and dtypes, ``HistoryBuffer``
+    instances and ``OrderedDict`` objects.
+    """
+
+    _ALLOWED = INFO_GLOBALS | CHECKPOINT_GLOBALS
+    dispatch = dict(pickle._Unpickler.dispatch)
+
+    def find_class(self, module: str, name: str) -> Any:
+        """Resolve an allowed global or raise :class:`RefusedGlobalError`."""
+        return _find_allowed(module, name, self._ALLOWED, torch_dtypes=True)
+
+    def load_build(self) -> None:
+        """``BUILD`` on the allowed stateful types only."""
+        inst = self.stack[-2]  # the state is on top
+        if not (isinstance(inst, (np.ndarray, np.dtype, _history_buffer()))
+                or type(inst) is collections.OrderedDict):
+            raise RefusedGlobalError(
+                f'BUILD (setting the state) of a {type(inst).__qualname__}')
+        super().load_build()
+
+    dispatch[pickle.BUILD[0]] = load_build
+
+    def load(self) -> Any:
+        """Unpickle, keeping ``HistoryBuffer``'s registry unchanged."""
+        with _statistics_registry_restored():
+            return super().load()
+
+
+def _checkpoint_load(file, **kwargs) -> Any:
+    """``pickle_module.load`` (torch's legacy format reads its header so)."""
+    return CheckpointUnpickler(file, **kwargs).load()
+
+
+#: The ``pickle_module`` handed to ``torch.load`` for checkpoints.
+CHECKPOINT_PICKLE = types.SimpleNamespace(
+    __name__=__name__ + '.CHECKPOINT_PICKLE',
+    Unpickler=CheckpointUnpickler,
+    load=_checkpoint_load,
+    loads=lambda data, **kwargs: _checkpoint_load(io.BytesIO(data), **kwargs),
+    UnpicklingError=pickle.UnpicklingError)
+
+
+class UnsafeCheckpointError(RefusedGlobalError):
+    """A checkpoint pickles a refused global; nothing from it was run."""
+
+
+class CorruptFileError(ValueError):
+    """A file is empty, truncated or not of the expected kind."""
+
+
+def _check_file(path: str, what: str) -> None:
+    if not osp.isfile(path):
+        raise FileNotFoundError(f'{what} {path} can not be found.')
+    if os.path.getsize(path) == 0:
+        raise CorruptFileError(f'{what} {path} is empty (0 bytes).')
+
+
+def load_info_file(path: str) -> Any:
+    """Unpickle an info file, allowing only :data:`INFO_GLOBALS`.
+
+    Args:
+        path (str): The ``.pkl`` file.
+
+    Returns:
+        Any: Its content (a dict for info files of this library).
+
+    Raises:
+        FileNotFoundError: If ``path`` is not a file.
+        RefusedGlobalError: If it names another global; the message names
+            the file and the global, and nothing from it was executed.
+        CorruptFileError: If it is empty, truncated or not a pickle.
+    """
+    _check_file(path, 'info file')
+    with open(path, 'rb') as f:
+        try:
+            return InfoUnpickler(f).load()
+        except RefusedGlobalError as err:
+            raise RefusedGlobalError(
+                f'Refusing to load info file {path}: it pickles '
+                f'{err.qualname}, which an info file never holds (only '
+                'builtin containers and scalars and numpy arrays are '
+                'allowed). Nothing from it was executed.') from None
+        except Exception as err:  # noqa: BLE001 - any decode failure
+            raise CorruptFileError(
+                f'info file {path} is truncated or not a pickle '
+                f'({type(err).__name__}: {err}); re-create it with '
+                'tools/create_data.py --overwrite.') from None
+
+
+def load_checkpoint_file(filename: str,
+                         map_location: Optional[Union[str, Callable,
+                                                      torch.device,
+                                                      Dict]] = None) -> Any:
+    """Load a local checkpoint through the restricted unpickler.
+
+    Args:
+        filename (str): Path of the checkpoint file.
+        map_location (str | callable | torch.device | dict, optional): As
+            for :func:`torch.load`. Defaults to None.
+
+    Returns:
+        dict: The checkpoint.
+
+    Raises:
+        FileNotFoundError: If ``filename`` is not a file.
+        UnsafeCheckpointError: If it pickles a global outside the
+            allow-list; the message names the file and the global, and
+            nothing from it was executed.
+        CorruptFileError: If it is empty, truncated or not a checkpoint.
+    """
+    filename = osp.expanduser(filename)
+    _check_file(filename, 'checkpoint')
+    with open(filename, 'rb') as f:
+        head = f.read(2)
+    # torch's zip format, or its legacy format (a protocol-2 pickle).
+    if not (zipfile.is_zipfile(filename) or head[:1] == b'\x80'):
+        raise CorruptFileError(
+            f'checkpoint {filename} is truncated or not a torch checkpoint '
+            f'(neither a complete zip archive nor a legacy pickle; it starts '
+            f'with {head!r}).')
+    try:
+        return torch.load(
+            filename,
+            map_location=map_location,
+            pickle_module=CHECKPOINT_PICKLE,
+            weights_only=False)
+    except RefusedGlobalError as err:
+        raise UnsafeCheckpointError(
+            f'Refusing to load checkpoint {filename}: it pickles '
+            f'{err.qualname}, which is outside the allow-list of tensors, '
+            'containers, numpy arrays and mmengine message hubs. Nothing '
+            'from it was executed. If you trust this file, load it with '
+            'torch.load(weights_only=False) yourself and re-save its '
+            'state_dict.') from None
+    except (RuntimeError, EOFError, pickle.UnpicklingError, ValueError,
+            KeyError, IndexError) as err:
+        # Other RuntimeErrors (a CUDA checkpoint on a CPU machine, ...) are
+        # not about the file's integrity: let them through.
+        if isinstance(err, RuntimeError) and not any(
+                word in str(err) for word in ('PytorchStreamReader', 'zip')):
+            raise
+        first_line = (str(err).splitlines() or [''])[0]
+        raise CorruptFileError(
+            f'checkpoint {filename} is truncated or not a torch checkpoint '
+            f'({type(err).__name__}: {first_line}).') from None
+
+
+def _load_from_local(filename: str, map_location=None):
+    """mmengine ``CheckpointLoader`` scheme of local paths."""
+    return load_checkpoint_file(filename, map_location)
+
+
+def _load_from_http(filename: str, map_location=None, model_dir=None):
+    """mmengine ``CheckpointLoader`` scheme of ``http(s)://`` URLs.
+
+    Downloads into torch hub's cache as mmengine does (rank 0 first), then
+    loads the file like a local one.
+    """
+    from urllib.parse import urlparse
+
+    from mmengine.dist import barrier, get_dist_info
+    rank, world_size = get_dist_info()
+    folder = model_dir or osp.join(torch.hub.get_dir(), 'checkpoints')
+    cached = osp.join(folder, osp.basename(urlparse(filename).path))
+
+    def download():
+        if not osp.isfile(cached):
+            os.makedirs(folder, exist_ok=True)
+            torch.hub.download_url_to_file(filename, cached, progress=False)
+
+    if rank == 0:
+        download()
+    if world_size > 1:
+        barrier()
+        if rank > 0:
+            download()
+    return load_checkpoint_file(cached, map_location)
+
+
+def install_checkpoint_loader() -> None:
+    """Make mmengine load local and ``http(s)`` checkpoints restrictedly.
+
+    Replaces mmengine's loaders of the local scheme ``''`` and of
+    ``http://`` / ``https://`` (``force=True``: mmengine offers no other
+    way to choose how a scheme unpickles). Nothing is installed on import:
+    :class:`~projects.occ_common.hooks.WeightsOnlyCheckpointHook` calls
+    this in ``before_run`` (before the Runner loads, resumes or
+    initialises weights) and ``tools/test.py`` before it builds the
+    Runner. Calling it again does nothing more.
+    """
+    from mmengine.runner.checkpoint import CheckpointLoader
+    schemes = CheckpointLoader._schemes
+    if schemes.get('') is not _load_from_local:
+        CheckpointLoader.register_scheme(
+            prefixes='', loader=_load_from_local, force=True)
+    if schemes.get('https://') is not _load_from_http:
+        CheckpointLoader.register_scheme(
+            prefixes=('http://', 'https://'),
+            loader=_load_from_http,
+            force=True)
+
+
+def is_installed() -> bool:
+    """Whether :func:`install_checkpoint_loader` has run in this process."""
+    from mmengine.runner.checkpoint import CheckpointLoader
+    return CheckpointLoader._schemes.get('') is _load_from_local
+
+
+__all__ = [
+    'CHECKPOINT_GLOBALS', 'CHECKPOINT_PICKLE', 'CorruptFileError',
+    'INFO_GLOBALS', 'RefusedGlobalError', 'UnsafeCheckpointError',
+    'install_checkpoint_loader', 'is_installed', 'load_checkpoint_file',
+    'load_info_file', 'statistic_names'
+]

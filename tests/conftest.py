@@ -1,0 +1,28 @@
+"""Session-wide fixtures: tiny synthetic worlds shared by test files."""
+import shutil
+import warnings
+
+import pytest
+
+from projects.occ_common.testing.tiny_world import make_tiny_world
+from projects.occ_common.testing.tool_logs import run_create_data
+
+
+@pytest.fixture(scope='session')
+def converted_tiny_world(tmp_path_factory):
+    """The default tiny world (one scene of two key frames, 160x90 images)
+    converted with tools/create_data.py; its one scene is both the train
+    and the val split. Read-only: copy it before damaging anything."""
+    root = make_tiny_world(str(tmp_path_factory.mktemp('tiny_world')))
+    with warnings.catch_warnings():
+        warnings.filterwarnings('ignore', 'synthetic world with one scene')
+        run_create_data('--root-path', root, '--version', 'v1.0-mini')
+    return root
+
+
+@pytest.fixture
+def world_copy(converted_tiny_world, tmp_path):
+    """A private copy of :func:`converted_tiny_world` to damage."""
+    copy = str(tmp_path / 'world')
+    shutil.copytree(converted_tiny_world, copy)
+    return copy

@@ -1,0 +1,150 @@
+"""Info files: read without running code, checked key by key, never empty.
+
+Each test damages a private copy of the converted tiny world (one scene,
+two key frames) and builds the SurroundOcc dataset of the base config.
+"""
+import os
+import os.path as osp
+import re
+
+import mmengine
+import numpy as np
+import pytest
+from mmdet3d.registry import DATASETS
+from mmdet3d.utils import register_all_modules
+from mmengine.config import Config
+
+import projects.occ_common  # noqa: F401  (registers)
+from projects.occ_common.datasets.converters.nuscenes_occ_converter import \
+    SYNTHETIC_MARKER
+from projects.occ_common.testing.tiny_world import make_tiny_world
+from projects.occ_common.testing.tool_logs import run_create_data
+from projects.occ_common.utils import (CorruptFileError, RefusedGlobalError,
+                                       load_info_file)
+
+register_all_modules(init_default_scope=True)
+REPO = osp.dirname(osp.dirname(osp.dirname(osp.dirname(__file__))))
+TRAIN = 'nuscenes_occ_infos_train.pkl'
+
+
+def build(root, test_mode=False, split='train'):
+    cfg = Config.fromfile(
+        osp.join(REPO, 'configs', '_base_', 'datasets', 'surroundocc-nus.py'))
+    ds_cfg = cfg.train_dataloader.dataset
+    ds_cfg.data_root = root
+    ds_cfg.ann_file = f'nuscenes_occ_infos_{split}.pkl'
+    ds_cfg.test_mode = test_mode
+    return DATASETS.build(ds_cfg)
+
+
+def rewrite(root, edit):
+    """Apply ``edit(infos)`` to the train info file."""
+    path = osp.join(root, TRAIN)
+    infos = load_info_file(path)
+    edit(infos)
+    mmengine.dump(infos, path)
+    return infos
+
+
+class _Evil:
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        return (os.system, (f'touch {self.marker}', ))
+
+
+def test_info_file_with_a_payload_is_never_run(world_copy, tmp_path):
+    """The os.system payload that used to run through tools/test.py."""
+    marker = tmp_path / 'pwned'
+    path = osp.join(world_copy, TRAIN)
+    mmengine.dump(dict(metainfo={}, data_list=[_Evil(marker)]), path)
+    with pytest.raises(RefusedGlobalError,
+                       match=f'Refusing to load info file {re.escape(path)}'
+                       ': it pickles posix.system'):
+        build(world_copy)
+    assert not marker.exists()
+
+
+@pytest.mark.parametrize('size', [0, 300])
+def test_empty_or_truncated_info_file_names_it(world_copy, size):
+    path = osp.join(world_copy, TRAIN)
+    with open(path, 'rb') as f:
+        data = f.read()
+    with open(path, 'wb') as f:
+        f.write(data[:size])
+    with pytest.raises(CorruptFileError, match=re.escape(path)):
+        build(world_copy)
+
+
+@pytest.mark.parametrize('edit, msg', [
+    (lambda s: s['images']['CAM_BACK'].pop('cam2img'),
+     r"images: CAM_BACK lacks the keys \['cam2img'\]"),
+    (lambda s: s['lidar_points'].update(lidar2ego=np.eye(3).tolist()),
+     r'lidar_points.lidar2ego: expected a 4x4 matrix, got shape \(3, 3\)'),
+    (lambda s: s['images']['CAM_FRONT']['lidar2cam'][0].__setitem__(
+        0, float('nan')),
+     'images.CAM_FRONT.lidar2cam: the matrix holds NaN or inf'),
+    (lambda s: s['images']['CAM_FRONT']['cam2img'][1].__setitem__(
+        2, float('inf')),
+     'images.CAM_FRONT.cam2img: the matrix holds NaN or inf'),
+    (lambda s: s['lidar_sweeps'][0]['lidar_points'].pop('sensor2lidar') and
+     s['lidar_sweeps'][0]['lidar_points'].pop('lidar2sensor'),
+     r'lidar_sweeps\[0\]: lidar_points needs sensor2lidar or lidar2sensor'),
+    (lambda s: s.pop('lidar_points'), r"lacks the keys \['lidar_points'\]"),
+])
+def test_malformed_sample_names_file_sample_and_key(world_copy, edit, msg):
+    """A missing nested key (KeyError 'cam2img'), a 3x3 lidar2ego
+    (IndexError), NaN / inf calibration (later a crash inside BCE)."""
+    infos = rewrite(world_copy, lambda i: edit(i['data_list'][1]))
+    token = infos['data_list'][1]['token']
+    with pytest.raises(ValueError,
+                       match=f'{TRAIN}: sample {token} .*{msg}'):
+        build(world_copy)
+
+
+def test_empty_dataset_is_an_error(world_copy):
+    """0 samples in the file, or none left by filter_empty_gt."""
+    infos = rewrite(world_copy,
+                    lambda i: [s.update(occ_surroundocc_path=None)
+                               for s in i['data_list']])
+    with pytest.raises(ValueError, match='none of its 2 samples .* has a '
+                       'surroundocc occupancy label'):
+        build(world_copy)
+    assert len(build(world_copy, test_mode=True)) == 2
+    infos['data_list'] = []
+    mmengine.dump(infos, osp.join(world_copy, TRAIN))
+    with pytest.raises(ValueError, match=f'{TRAIN} holds no samples'):
+        build(world_copy, test_mode=True)
+
+
+def test_info_records_the_calibrated_image_size(converted_tiny_world):
+    infos = load_info_file(osp.join(converted_tiny_world, TRAIN))
+    image = infos['data_list'][0]['images']['CAM_FRONT']
+    assert (image['width'], image['height']) == (160, 90)
+
+
+def test_scenes_outside_the_official_split_are_an_error(world_copy):
+    """Without the synthetic marker the official v1.0-mini split applies,
+    which lists none of the world's scenes: an error, not a 0-sample pkl
+    written with exit code 0."""
+    os.remove(osp.join(world_copy, SYNTHETIC_MARKER))
+    with pytest.raises(ValueError,
+                       match=r'the train and val split would hold no sample'
+                       r".*scenes \['scene-0001'\]"):
+        run_create_data('--root-path', world_copy, '--version', 'v1.0-mini',
+                        '--overwrite')
+    with pytest.raises(FileNotFoundError,
+                       match=r"v1.0-trainval not found: .* holds the nuScenes "
+                       r"versions \['v1.0-mini'\]"):
+        run_create_data('--root-path', world_copy, '--overwrite')
+
+
+def test_v1_0_test_of_a_synthetic_world(tmp_path):
+    """All scenes of a synthetic v1.0-test world form the test split
+    (KeyError 'train' before)."""
+    root = make_tiny_world(str(tmp_path / 'world'), version='v1.0-test')
+    written = run_create_data('--root-path', root, '--version', 'v1.0-test')
+    assert list(written) == ['test']
+    assert len(build(root, test_mode=True, split='test')) == 2

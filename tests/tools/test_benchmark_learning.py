@@ -1,0 +1,170 @@
+"""tools/benchmark_learning.py: budget rewrite, resume, time limit, reuse.
+
+The training runs use the toy config (tests/data/configs/toy_occ.py: 8
+training samples in batches of 2, so 4 iterations per epoch) in child
+processes, exactly as the benchmark starts them.
+"""
+import importlib.util
+import json
+import os.path as osp
+import subprocess
+import sys
+from types import SimpleNamespace
+
+import pytest
+from mmengine.config import Config
+
+ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
+CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ.py')
+
+
+def _tool(name='benchmark_learning'):
+    """A script of tools/ as a module (tools/ on sys.path for its
+    imports, as when it runs as a script)."""
+    tools = osp.join(ROOT, 'tools')
+    if tools not in sys.path:
+        sys.path.insert(0, tools)
+    spec = importlib.util.spec_from_file_location(
+        f'{name}_tool', osp.join(tools, f'{name}.py'))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _epoch_cfg():
+    return Config(dict(
+        train_cfg=dict(type='EpochBasedTrainLoop', max_epochs=12,
+                       val_interval=1),
+        param_scheduler=[
+            dict(type='LinearLR', start_factor=0.1, by_epoch=False,
+                 begin=0, end=20),
+            dict(type='MultiStepLR', by_epoch=True, milestones=[8, 11]),
+            dict(type='CosineAnnealingLR', T_max=12, begin=0, end=12,
+                 convert_to_iter_based=True),
+        ],
+        default_hooks=dict(checkpoint=dict(type='CheckpointHook',
+                                           interval=1),
+                           logger=dict(type='LoggerHook', interval=50)),
+        log_processor=dict(type='LogProcessor', window_size=50,
+                           by_epoch=True)))
+
+
+def test_budget_stretches_schedule():
+    """12 epochs x 10 iterations = 120 planned; a budget of 60 halves
+    every position: warm-up end 20 it -> 10; milestones 8, 11 epochs = 80,
+    110 it -> 40, 55; cosine T_max = end = 12 epochs = 120 it -> 60."""
+    cfg = _epoch_cfg()
+    assert _tool().set_iteration_budget(cfg, 60, 15, 10, 5) == 60
+    assert cfg.train_cfg == dict(type='IterBasedTrainLoop', max_iters=60,
+                                 val_interval=15)
+    warmup, steps, cosine = cfg.param_scheduler
+    assert (warmup['begin'], warmup['end']) == (0, 10)
+    assert steps['milestones'] == [40, 55]
+    assert (cosine['T_max'], cosine['begin'], cosine['end']) == (60, 0, 60)
+    assert 'convert_to_iter_based' not in cosine
+    assert all(s['by_epoch'] is False for s in cfg.param_scheduler)
+    ckpt = cfg.default_hooks.checkpoint
+    assert (ckpt.interval, ckpt.by_epoch, ckpt.save_last) == (15, False,
+                                                              True)
+    assert cfg.default_hooks.logger.log_metric_by_epoch is False
+    assert cfg.log_processor.window_size == 5
+
+
+def test_budget_none_keeps_length():
+    """No budget: 12 epochs x 10 = 120 iterations, positions unscaled."""
+    cfg = _epoch_cfg()
+    assert _tool().set_iteration_budget(cfg, None, 30, 10, 10) == 120
+    assert cfg.param_scheduler[1]['milestones'] == [80, 110]
+
+
+def _spec(work_dir, iters, max_minutes=None):
+    return dict(config=CONFIG, options=[], iters=iters, val_interval=3,
+                max_minutes=max_minutes, log_interval=1, work_dir=work_dir)
+
+
+def _train(spec):
+    proc = subprocess.run(
+        [sys.executable, osp.join(ROOT, 'tools', 'benchmark_learning.py'),
+         '--train-one', json.dumps(spec)], cwd=ROOT, capture_output=True,
+        text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    with open(osp.join(spec['work_dir'], 'train_clock.json')) as f:
+        return json.load(f)
+
+
+@pytest.mark.slow
+def test_resume_continues_curves_and_clock(tmp_path):
+    """3 iterations, then the same work dir with a budget of 6 resumes at
+    iteration 3: one loss point per iteration (log interval 1), validation
+    of the untrained model (0), at 3 and 6 (not again at 3 on resuming),
+    and the training time of both segments adds up."""
+    work = str(tmp_path / 'train')
+    first = _train(_spec(work, 3))
+    assert (first['iterations'], first['stopped_by_time']) == (3, False)
+    second = _train(_spec(work, 6))
+    assert second['iterations'] == 6
+    assert second['train_seconds'] > first['train_seconds'] > 0
+    curves = _tool().read_curves(work)
+    assert [s for s, _ in curves['loss']] == [1, 2, 3, 4, 5, 6]
+    assert [s for s, _ in curves['val']] == [0, 3, 6]
+    assert 'occ/mIoU' in curves['val'][-1][1]
+
+
+@pytest.mark.slow
+def test_time_limit_stops_and_validates(tmp_path):
+    """A limit of 0.006 s is reached in the first iteration: training ends
+    there, iteration 1 is checkpointed (save_last) and validated."""
+    work = str(tmp_path / 'train')
+    clock = _train(_spec(work, 6, max_minutes=1e-4))
+    assert (clock['iterations'], clock['stopped_by_time']) == (1, True)
+    assert osp.isfile(osp.join(work, 'iter_1.pth'))
+    assert [s for s, _ in _tool().read_curves(work)['val']] == [0, 1]
+
+
+@pytest.mark.slow
+def test_bench_run_writes_row_and_reuses_it(tmp_path, capsys):
+    """A full run (train, test, curve) and its reuse; other settings for
+    the same run folder are refused."""
+    tool = _tool()
+    args = SimpleNamespace(iters=4, val_interval=2, max_minutes=None,
+                           log_interval=1, pictures=0, val_scenes=1,
+                           samples=4)
+    log = str(tmp_path / 'log.txt')
+    row = tool.bench_run('toy', CONFIG, [], args, None, str(tmp_path), log)
+    assert row['iterations'] == 4 and row['epoch_length'] == 4
+    assert row['labels'] == 'SurroundOcc'
+    assert [s for s, _ in row['curves']['val']] == [0, 2, 4]
+    # The test of the last checkpoint and the last validation agree.
+    assert row['metrics']['occ/mIoU'] == pytest.approx(
+        row['curves']['val'][-1][1]['occ/mIoU'], abs=1e-3)
+    assert osp.getsize(row['curve_png']) > 1000
+    again = tool.bench_run('toy', CONFIG, [], args, None, str(tmp_path), log)
+    assert 'reusing' in capsys.readouterr().out
+    assert again['metrics'] == row['metrics']
+    args.iters = 8
+    with pytest.raises(SystemExit, match='other settings'):
+        tool.bench_run('toy', CONFIG, [], args, None, str(tmp_path), log)
+
+
+def test_world_with_other_parameters_is_refused(tmp_path):
+    """A synthetic world of 3 scenes is not silently reused for 10."""
+    meta = tmp_path / 'synthetic_gt' / 'meta.json'
+    meta.parent.mkdir()
+    meta.write_text(json.dumps(dict(complete=True, parameters=dict(
+        num_scenes=3, samples_per_scene=8, seed=0))))
+    with pytest.raises(SystemExit, match='num_scenes'):
+        _tool('occ_runs').prepare_world(str(tmp_path), str(tmp_path / 'l'),
+                                        scenes=10, samples=8)
+
+
+def test_format_table_extra_lines():
+    """Rows become columns; extra lines follow the mIoU."""
+    rows = [dict(name='a', labels='Occ3D', train_s=90.0,
+                 metrics={'occ/IoU': 50.0, 'occ/mIoU': 12.345,
+                          'occ/car': float('nan')}, iterations=7)]
+    table = _tool('occ_runs').format_table(
+        rows, [('iterations', lambda r: str(r['iterations']))])
+    assert table.splitlines() == [
+        '| | a |', '|---|---|', '| labels | Occ3D |',
+        '| train time | 1.5 min |', '| IoU | 50.00 |',
+        '| **mIoU** | 12.35 |', '| iterations | 7 |', '| car | n/a |']

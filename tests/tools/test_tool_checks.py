@@ -1,0 +1,195 @@
+"""tools/train.py and tools/test.py refuse bad options, configs and
+checkpoints with a clear error before doing any work.
+
+The tools run in this process (``main(argv)``) on the toy config, which
+trains and evaluates in seconds.
+"""
+import importlib
+import os
+import os.path as osp
+import uuid
+
+import pytest
+import torch
+
+from projects.occ_common.testing.tool_logs import load_tool
+from projects.occ_common.utils import (CorruptFileError, UnsafeCheckpointError,
+                                       load_checkpoint_file)
+
+ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
+CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ.py')
+
+
+config_checks = importlib.import_module(
+    'projects.occ_common.utils.config_checks')
+test_tool, train_tool = load_tool('test.py'), load_tool('train.py')
+
+
+def _name():
+    return f'experiment_name=tool_checks_{uuid.uuid4().hex}'
+
+
+@pytest.mark.parametrize('item, msg', [
+    ('train_cfg.max_epochs', "expected KEY=VALUE, got 'train_cfg.max_epochs'"),
+    ('=3', "expected KEY=VALUE, got '=3'"),
+    ('model.in_channels=[1,2', "cannot parse the value of "
+     "'model.in_channels=[1,2' (Imbalanced brackets"),
+])
+def test_malformed_cfg_options_name_the_item(item, msg, capsys):
+    """mmengine's DictAction failed with 'not enough values to unpack'."""
+    for tool in (train_tool, test_tool):
+        argv = [CONFIG] + (['x.pth'] if tool is test_tool else [])
+        with pytest.raises(SystemExit) as err:
+            tool.parse_args(argv + ['--cfg-options', item])
+        assert err.value.code == 2
+        assert f'--cfg-options: {msg}' in capsys.readouterr().err
+
+
+@pytest.mark.parametrize('item, msg', [
+    ('train_cfg.max_epochs=two', "train_cfg.max_epochs='two' \\(a string\\)"
+     ', but the config has the integer 2 there'),
+    ('train_cfg.max_epochs=2.5', 'max_epochs=.2.5. \\(a number\\)'),
+    ('train_dataloader.num_workers=true', 'num_workers=.true. \\(a bool\\)'),
+    ('model.in_channels=[3,3]', 'in_channels=.\\[3,3\\]. \\(a list\\)'),
+])
+def test_wrongly_typed_cfg_options_name_key_and_kind(item, msg):
+    """They used to fail deep in the training loop, or not at all."""
+    args = train_tool.parse_args([CONFIG, '--cfg-options', item])
+    with pytest.raises(ValueError, match=msg):
+        train_tool.build_cfg(args)
+
+
+def test_kind_preserving_overrides_pass():
+    """An integer for a float, None anywhere, new keys, a number typed for
+    a string (taken as the text typed)."""
+    args = train_tool.parse_args([
+        CONFIG, '--cfg-options', 'optim_wrapper.optimizer.lr=1',
+        'load_from=None', 'model.new_key=5', 'default_scope=007',
+        'train_dataloader.dataset.num_samples=4'
+    ])
+    cfg = train_tool.build_cfg(args)
+    assert cfg.optim_wrapper.optimizer.lr == 1
+    assert cfg.model.new_key == 5
+    assert cfg.train_dataloader.dataset.num_samples == 4
+    assert cfg.default_scope == '007'
+
+
+def test_top_level_typo_is_refused(tmp_path):
+    """tset_dataloader was silently ignored (the base test_dataloader
+    ran); own keys far from every Runner key are fine."""
+    config = tmp_path / 'typo.py'
+    config.write_text(f"_base_ = ['{CONFIG}']\n"
+                      'tset_dataloader = dict(batch_size=1)\n'
+                      'my_grid = [8, 8, 4]\n')
+    for tool, extra in ((train_tool, []), (test_tool, ['x.pth'])):
+        args = tool.parse_args([str(config)] + extra)
+        with pytest.raises(ValueError,
+                           match="unknown top-level key 'tset_dataloader' "
+                           "\\(did you mean 'test_dataloader'\\?\\)"):
+            tool.build_cfg(args)
+    args = train_tool.parse_args(
+        [CONFIG, '--cfg-options', 'val_evaluater.type=X'])
+    with pytest.raises(ValueError, match="'val_evaluater' \\(did you mean "
+                       "'val_evaluator'"):
+        train_tool.build_cfg(args)
+    assert config_checks.edit_distance('tset', 'test') == 1
+    assert config_checks.edit_distance('train_pipeline',
+                                       'tta_pipeline') == 3
+
+
+@pytest.fixture(scope='module')
+def toy_checkpoint(tmp_path_factory):
+    """epoch_1.pth of the toy config (tools/train.py in this process)."""
+    work_dir = str(tmp_path_factory.mktemp('toy'))
+    train_tool.main([
+        CONFIG, '--work-dir', work_dir, '--cfg-options',
+        'train_cfg.max_epochs=1', _name()
+    ])
+    return osp.join(work_dir, 'epoch_1.pth')
+
+
+def _evaluate(checkpoint, tmp_path, *extra):
+    test_tool.main([
+        CONFIG, checkpoint, '--work-dir',
+        str(tmp_path / uuid.uuid4().hex), *extra, '--cfg-options', _name()
+    ])
+
+
+def _modified(toy_checkpoint, tmp_path, edit):
+    checkpoint = load_checkpoint_file(toy_checkpoint)
+    edit(checkpoint['state_dict'])
+    path = str(tmp_path / 'modified.pth')
+    torch.save(checkpoint, path)
+    return path
+
+
+def test_checkpoint_of_another_model_is_refused(toy_checkpoint, tmp_path):
+    """Renamed keys and another shape: refused (before, rc 0 and a random
+    model's metric), unless --allow-key-mismatch."""
+
+    def other_model(state):
+        state['head.weight'] = state.pop('classifier.weight')
+        state['classifier.bias'] = torch.zeros(5)
+
+    path = _modified(toy_checkpoint, tmp_path, other_model)
+    with pytest.raises(ValueError) as err:
+        _evaluate(path, tmp_path)
+    message = str(err.value)
+    assert message.startswith(f'{path} does not fit the model of {CONFIG}')
+    assert "1 of the model's 2 tensors are missing (classifier.weight)" in \
+        message
+    assert "1 keys are not the model's (head.weight)" in message
+    assert 'classifier.bias (5,) vs (3,)' in message
+    assert '--allow-key-mismatch' in message
+    _evaluate(_modified(toy_checkpoint, tmp_path,
+                        lambda s: s.pop('classifier.bias')), tmp_path,
+              '--allow-key-mismatch')
+
+
+def test_nan_weights_are_refused_even_when_allowed(toy_checkpoint,
+                                                   tmp_path):
+    """An all-NaN checkpoint evaluated with rc 0 before."""
+    path = _modified(toy_checkpoint, tmp_path,
+                     lambda s: s['classifier.weight'].fill_(float('nan')))
+    for extra in ([], ['--allow-key-mismatch']):
+        with pytest.raises(ValueError,
+                           match='holds non-finite weights: classifier.'
+                           'weight \\(9 of 9 values\\)'):
+            _evaluate(path, tmp_path, *extra)
+
+
+class _Evil:
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        return (os.system, (f'touch {self.marker}', ))
+
+
+@pytest.mark.parametrize('damage', ['truncated', 'empty', 'malicious'])
+def test_bad_checkpoint_files_through_test_and_resume(
+        damage, toy_checkpoint, tmp_path):
+    """tools/test.py CKPT and tools/train.py --resume CKPT name the file;
+    a payload never runs (a truncated checkpoint used to fail with
+    'PytorchStreamReader failed reading zip archive')."""
+    path = str(tmp_path / 'bad.pth')
+    marker = tmp_path / 'pwned'
+    if damage == 'malicious':
+        torch.save({'state_dict': {}, 'meta': _Evil(marker)}, path)
+        error = UnsafeCheckpointError
+    else:
+        with open(toy_checkpoint, 'rb') as f:
+            data = f.read()
+        with open(path, 'wb') as f:
+            f.write(data[:len(data) // 2] if damage == 'truncated' else b'')
+        error = CorruptFileError
+    with pytest.raises(error, match=path):
+        _evaluate(path, tmp_path)
+    with pytest.raises(error, match=path):
+        train_tool.main([
+            CONFIG, '--work-dir',
+            str(tmp_path / 'resume'), '--resume', path, '--cfg-options',
+            _name()
+        ])
+    assert not marker.exists()

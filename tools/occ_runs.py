@@ -1,0 +1,193 @@
+"""Steps shared by ``tools/demo.py`` and ``tools/benchmark_learning.py``.
+
+Both drive the user-facing tools (``create_synthetic_nuscenes.py``,
+``create_data.py``, ``train.py``, ``test.py``) as subprocesses, read the
+metrics mmengine logged, and print a results table. Like the tools, this
+module imports no plugin code.
+"""
+import glob
+import json
+import os.path as osp
+import subprocess
+import sys
+from typing import Dict, List, Optional, Sequence
+
+ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+#: The generator writes this file first and marks it complete at the end.
+WORLD_META = osp.join('synthetic_gt', 'meta.json')
+INFO_PREFIX = 'nuscenes_occ'
+
+
+def tool(name: str) -> List[str]:
+    """The command prefix of ``tools/<name>`` with this interpreter."""
+    return [sys.executable, osp.join(ROOT, 'tools', name)]
+
+
+def run(cmd: List[str], log_path: str, what: str = 'step') -> None:
+    """Run ``cmd`` from the repository root, echo and log its output.
+
+    Raises:
+        SystemExit: If the command fails; names the command and the log.
+    """
+    print(f'\n$ {" ".join(cmd)}', flush=True)
+    with open(log_path, 'a') as log:
+        proc = subprocess.Popen(
+            cmd,
+            cwd=ROOT,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            bufsize=1)
+        for line in proc.stdout:
+            sys.stdout.write(line)
+            log.write(line)
+        if proc.wait() != 0:
+            raise SystemExit(f'{what} failed ({proc.returncode}): '
+                             f'{" ".join(cmd)}; see {log_path}')
+
+
+def scene_names(first: int, count: int) -> List[str]:
+    """Synthetic scene names ``scene-XXXX`` (1-based, as generated)."""
+    return [f'scene-{i:04d}' for i in range(first, first + count)]
+
+
+def prepare_world(data_root: str,
+                  log_path: str,
+                  scenes: int,
+                  samples: int,
+                  image_size: Optional[Sequence[int]] = None,
+                  val_scenes: Optional[int] = None,
+                  seed: int = 0) -> None:
+    """Generate (unless present) and convert a synthetic world.
+
+    The world is reused when ``data_root`` already holds a complete one
+    with the same scene count, samples, image size and seed; one written
+    with other parameters is refused rather than silently mixed in.
+
+    Args:
+        data_root (str): Dataset root.
+        log_path (str): Log file of the tools' output.
+        scenes (int): Number of scenes.
+        samples (int): Key frames per scene.
+        image_size (Sequence[int], optional): Camera ``(W, H)``. Defaults
+            to the generator's.
+        val_scenes (int, optional): The last ``val_scenes`` scenes form the
+            held-out val split. Defaults to the converter's rule (the last
+            fifth).
+        seed (int): Generator seed. Defaults to 0.
+
+    Raises:
+        SystemExit: If ``data_root`` holds a different or unfinished world.
+    """
+    meta_path = osp.join(data_root, WORLD_META)
+    if osp.isfile(meta_path):
+        with open(meta_path) as f:
+            meta = json.load(f)
+        params = meta.get('parameters', {})
+        wanted = dict(num_scenes=scenes, samples_per_scene=samples, seed=seed)
+        if image_size is not None:
+            wanted['image_size'] = list(image_size)
+        differ = {k: (params.get(k), v) for k, v in wanted.items()
+                  if params.get(k) != v}
+        if differ or not meta.get('complete'):
+            raise SystemExit(
+                f'{data_root} holds another synthetic world (have, want: '
+                f'{differ}, complete: {meta.get("complete")}); remove it or '
+                'choose another --data-root.')
+    else:
+        cmd = tool('create_synthetic_nuscenes.py') + [
+            data_root, '--scenes', str(scenes), '--samples', str(samples),
+            '--seed', str(seed)]
+        if image_size is not None:
+            cmd += ['--image-size'] + [str(v) for v in image_size]
+        run(cmd, log_path, 'world generation')
+    if not osp.isfile(
+            osp.join(data_root, f'{INFO_PREFIX}_infos_val.pkl')):
+        cmd = tool('create_data.py') + [
+            'nuscenes', '--root-path', data_root, '--version', 'v1.0-mini']
+        if val_scenes is not None:
+            if not 0 < val_scenes < scenes:
+                raise SystemExit(f'expected 0 < val scenes < {scenes}, got '
+                                 f'{val_scenes}')
+            cmd += ['--val-scenes'] + scene_names(scenes - val_scenes + 1,
+                                                  val_scenes)
+        run(cmd, log_path, 'conversion')
+
+
+def data_options(data_root: str) -> List[str]:
+    """``--cfg-options`` pointing every dataloader at ``data_root``."""
+    root = data_root.rstrip('/') + '/'
+    return [
+        f'{split}_dataloader.dataset.data_root={root}'
+        for split in ('train', 'val', 'test')
+    ]
+
+
+def read_json_lines(path: str) -> List[dict]:
+    """The records of an mmengine json log (one JSON object a line)."""
+    with open(path) as f:
+        return [json.loads(line) for line in f if line.strip()]
+
+
+def last_metrics(work_dir: str) -> Dict[str, float]:
+    """The metrics of the newest test run logged under ``work_dir``.
+
+    mmengine's LoggerHook writes ``{work_dir}/{timestamp}/{timestamp}.json``.
+
+    Raises:
+        SystemExit: If no log or no ``occ/mIoU`` record is found.
+    """
+    logs = sorted(glob.glob(osp.join(work_dir, '*', '*.json')))
+    if not logs:
+        raise SystemExit(f'no metrics logged in {work_dir}')
+    metrics = [r for r in read_json_lines(logs[-1]) if 'occ/mIoU' in r]
+    if not metrics:
+        raise SystemExit(f'{logs[-1]} holds no occ/mIoU')
+    return metrics[-1]
+
+
+def class_keys(rows: Sequence[dict]) -> List[str]:
+    """Per-class metric names (``occ/<class>``) of the rows, in order."""
+    classes = []
+    for r in rows:
+        for key in r['metrics']:
+            name = key[len('occ/'):]
+            if (key.startswith('occ/') and '/' not in name
+                    and name not in ('IoU', 'mIoU') and name not in classes):
+                classes.append(name)
+    return classes
+
+
+def pct(value) -> str:
+    """A percentage with two decimals, ``n/a`` for None / NaN."""
+    return 'n/a' if value is None or value != value else f'{value:.2f}'
+
+
+def format_table(rows: List[dict], extra: Sequence[tuple] = ()) -> str:
+    """Markdown table: one column per row (model), one line per metric.
+
+    Args:
+        rows (list[dict]): Each with ``name``, ``labels``, ``train_s``,
+            ``metrics`` (logged ``occ/*`` keys).
+        extra (Sequence[tuple]): ``(label, fn)`` lines after the mIoU;
+            ``fn(row)`` gives the cell text.
+
+    Returns:
+        str: The table.
+    """
+    names = [r['name'] for r in rows]
+    lines = ['| | ' + ' | '.join(names) + ' |',
+             '|---' * (len(names) + 1) + '|']
+
+    def add(label, values):
+        lines.append(f'| {label} | ' + ' | '.join(values) + ' |')
+
+    add('labels', [r['labels'] for r in rows])
+    add('train time', [f'{r["train_s"] / 60:.1f} min' for r in rows])
+    add('IoU', [pct(r['metrics'].get('occ/IoU')) for r in rows])
+    add('**mIoU**', [pct(r['metrics'].get('occ/mIoU')) for r in rows])
+    for label, fn in extra:
+        add(label, [fn(r) for r in rows])
+    for name in class_keys(rows):
+        add(name, [pct(r['metrics'].get(f'occ/{name}')) for r in rows])
+    return '\n'.join(lines)
