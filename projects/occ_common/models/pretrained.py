@@ -43,8 +43,9 @@ Here instead:
   ``swin_converter`` when the part is an mmdet ``SwinTransformer``;
 * ``torchvision://NAME`` and ``http(s)://`` checkpoints are fetched into
   torch's hub cache (``$TORCH_HOME/hub/checkpoints``) without torchvision,
-  and every file is read with ``weights_only=True``
-  (:func:`~projects.occ_common.utils.load_weights_only`).
+  and every file is read with the library's restricted unpickler
+  (:func:`~projects.occ_common.utils.load_checkpoint_file`): tensors and
+  containers only, nothing in the file can run.
 """
 import logging
 import os
@@ -56,7 +57,7 @@ import torch
 from mmengine.logging import print_log
 from torch import Tensor, nn
 
-from ..utils.safe_checkpoint import load_weights_only
+from ..utils.safe_pickle import load_checkpoint_file
 
 #: torchvision's ImageNet weights (``IMAGENET1K_V1``, the file mmengine's
 #: ``torchvision://NAME`` resolves to), fetched without torchvision.
@@ -195,7 +196,7 @@ def checkpoint_state_dict(path: str,
     Returns:
         dict[str, Tensor]: Key -> tensor.
     """
-    ckpt = load_weights_only(path, map_location='cpu')
+    ckpt = load_checkpoint_file(path, map_location='cpu')
     for key in ('state_dict', 'model'):
         if isinstance(ckpt, Mapping) and isinstance(ckpt.get(key), Mapping):
             ckpt = ckpt[key]

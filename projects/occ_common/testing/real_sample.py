@@ -5,19 +5,18 @@ its mmdet3d v2 info file (six cameras' calibration, the LiDAR sweep). A
 user's clone has no ``../shared``: :func:`real_sample_dir` returns None and
 the tests that need it skip with :data:`MISSING_REASON`.
 
-The info file is a pickle; it is read with an unpickler that rebuilds
-plain containers and numpy scalars only, so the file cannot run code.
+The info file is a pickle; it is read with the library's restricted
+unpickler (:func:`~projects.occ_common.utils.load_info_file`), so it
+cannot run code.
 """
-import io
 import os.path as osp
-import pickle
 from typing import Optional, Tuple
 
 import numpy as np
 import torch
 from torch import Tensor
 
-from ..utils.safe_checkpoint import _numpy_reconstruct
+from ..utils.safe_pickle import load_info_file
 from .config_fingerprint import REPO_ROOT
 
 #: Where the sample lies relative to the repository root.
@@ -29,37 +28,6 @@ MISSING_REASON = ('the real nuScenes sample ../shared/data/'
 #: The six cameras in the order of the configs' ``cam_names``.
 CAM_NAMES = ('CAM_FRONT', 'CAM_FRONT_RIGHT', 'CAM_FRONT_LEFT', 'CAM_BACK',
              'CAM_BACK_LEFT', 'CAM_BACK_RIGHT')
-
-#: (module, name) pairs the info file may rebuild: numpy scalars and their
-#: dtypes, and the byte strings they are stored through.
-_ALLOWED = {
-    ('numpy', 'dtype'),
-    ('numpy.core.multiarray', 'scalar'),
-    ('numpy._core.multiarray', 'scalar'),
-    ('numpy.core.multiarray', '_reconstruct'),
-    ('numpy._core.multiarray', '_reconstruct'),
-    ('numpy', 'ndarray'),
-    ('_codecs', 'encode'),
-}
-
-
-class _InfoUnpickler(pickle.Unpickler):
-
-    def __init__(self, data: bytes, path: str) -> None:
-        super().__init__(io.BytesIO(data))
-        self.path = path
-
-    def find_class(self, module: str, name: str):
-        if (module, name) not in _ALLOWED:
-            raise pickle.UnpicklingError(
-                f'{self.path}: refusing to rebuild {module}.{name} (an info '
-                'file holds containers and numpy values only)')
-        if module.startswith('numpy'):
-            # numpy 2 moved core to _core; either name means this numpy's.
-            reconstruct, scalar = _numpy_reconstruct()
-            return dict(_reconstruct=reconstruct, scalar=scalar).get(
-                name) or getattr(np, name)
-        return super().find_class(module, name)
 
 
 def real_sample_dir() -> Optional[str]:
@@ -78,9 +46,7 @@ def load_info(path: Optional[str] = None) -> dict:
         dict: The mmdet3d v2 info of the key frame.
     """
     path = path or osp.join(REAL_SAMPLE_DIR, INFO_FILE)
-    with open(path, 'rb') as f:
-        infos = _InfoUnpickler(f.read(), path).load()
-    return infos['data_list'][0]
+    return load_info_file(path)['data_list'][0]
 
 
 def real_cameras(info: Optional[dict] = None) -> Tuple[Tensor, Tensor]:

@@ -12,6 +12,7 @@ from projects.occ_common.models.pretrained import (PretrainedMismatchError,
                                                    check_entries,
                                                    load_pretrained,
                                                    resolve_checkpoint)
+from projects.occ_common.utils import UnsafeCheckpointError
 
 register_all_modules(init_default_scope=False)
 
@@ -263,10 +264,12 @@ def test_torchvision_name_resolves_through_the_hub_cache(tmp_path,
 
 
 def test_unsafe_checkpoint_is_refused(tmp_path):
-    """Pretrained files go through the weights-only loader: a file that
-    pickles a function is refused, nothing from it runs."""
+    """Pretrained files go through the restricted unpickler: a file that
+    pickles a function is refused by name, nothing from it runs."""
     torch.save(dict(state_dict={}, hook=print), tmp_path / 'evil.pth')
-    with pytest.raises(Exception, match='Refusing to load checkpoint'):
+    with pytest.raises(UnsafeCheckpointError,
+                       match=r'Refusing to load checkpoint .*evil\.pth: it '
+                       r'pickles builtins\.print'):
         load_pretrained(_resnet(), 'img',
                         _entry(checkpoint=str(tmp_path / 'evil.pth')))
 
