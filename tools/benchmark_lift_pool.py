@@ -1,20 +1,26 @@
-"""Benchmark OccCylindrical's lift-pool and whole-model latency on CPU.
+"""Benchmark OccCylindrical's lift-pool: Table VI counts, memory, latency.
 
 Measures, at the size a config describes (the paper's by default: 6 views of
 1600x900 padded to 1600x928, 50 depth bins, a 58x100 feature map, i.e.
 6 x 50 x 58 x 100 = 1.74 M pseudo points):
 
-1. the peak memory of the camera lift + per-voxel max pool
-   (``lift_max_pool`` with the config's cylinder grid and chunk size) with
-   the fused autograd Function and with the naive outer-product-then-pool
-   path, forward and forward + backward, on the voxel indices of the real
-   frustum geometry. Each measurement runs in a fresh child process: the
-   peak RSS minus the RSS once the inputs exist
+1. ``--table6``: the pseudo points before and the occupied cylinder voxels
+   after the per-voxel max pool, lifted with the real calibration of the
+   nuScenes key frame in ``../shared/data/nuscenes_real_sample`` through the
+   config's cylinder and depth bins, for the paper config and its Table VI
+   ablations (d = 2, 10 m), next to the paper's counts;
+2. the peak memory of the camera lift + per-voxel max pool
+   (``lift_max_pool`` into the occupied voxels of the config's cylinder,
+   with its chunk size) with the fused autograd Function and with the
+   naive outer-product-then-pool path, forward and forward + backward, on
+   the voxel indices of the real calibration (a synthetic six-camera ring
+   where the sample is absent). Each measurement runs in a fresh child
+   process: the peak RSS minus the RSS once the inputs exist
    (:class:`projects.occ_common.utils.benchmarking.PeakMemory`) is the
    memory the lift itself needs;
-2. the forward latency of the whole model (``--model``), optionally at a
-   reduced image size (``--img-scale``) when the full one does not fit the
-   machine.
+3. ``--model``: the forward latency and peak memory of the whole model,
+   optionally at a reduced image size (``--img-scale``) when the full one
+   does not fit the machine.
 
 The model is built through the config's ``custom_imports``; the lift
 measurement also calls the plugin's frustum helpers to make its inputs.
@@ -22,12 +28,14 @@ measurement also calls the plugin's frustum helpers to make its inputs.
 Example::
 
     python tools/benchmark_lift_pool.py \
-        configs/occ_cyl/occcyl_r50-swint_3xb1-24e_surroundocc-nus.py --model
+        configs/occ_cyl/occcyl_r50-swins_3xb1-24e_surroundocc-nus.py \
+        --table6 --model
 """
 import argparse
 import json
 import math
 import os
+import os.path as osp
 import subprocess
 import sys
 import time
@@ -38,12 +46,30 @@ from mmengine.config import Config
 from mmengine.registry import init_default_scope
 from mmengine.utils import import_modules_from_strings
 
+from projects.occ_common.testing.real_sample import (MISSING_REASON,
+                                                     real_cameras,
+                                                     real_lidar2img,
+                                                     real_sample_dir)
 from projects.occ_common.utils.benchmarking import PeakMemory
+
+#: Table VI of the paper: depth interval d (m) -> pseudo points before /
+#: after the per-voxel max pool, and the GPU memory.
+TABLE6 = {
+    1.0: (1_740_000, 552_178, '10.63 GB'),
+    2.0: (870_000, 279_359, '6.77 GB'),
+    10.0: (174_000, 57_612, '5.50 GB'),
+}
+#: The Table VI ablations of a paper config, relative to its folder.
+TABLE6_ABLATIONS = ('ablations/occcyl-d2m_{}', 'ablations/occcyl-d10m_{}')
 
 
 def parse_args():
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('config', help='OccCylindrical config')
+    parser.add_argument(
+        '--table6', action='store_true',
+        help='print the Table VI counts of the config and its d = 2, 10 m '
+        'ablations on the real calibration')
     parser.add_argument(
         '--img-scale',
         type=float,
@@ -70,40 +96,97 @@ def _build_cfg(config):
     return cfg
 
 
-def _paper_geometry(cfg, img_scale=1.0):
-    """nuScenes-like 6-camera ring at the config's image size."""
-    from mmdet3d.structures import Det3DDataSample
-    img_h, img_w = (int(round(s * img_scale)) for s in cfg.img_size)
-    div = cfg.model.data_preprocessor.pad_size_divisor
-    pad_h, pad_w = (math.ceil(s / div) * div for s in (img_h, img_w))
-    num_cams = len(cfg.cam_names)
+def _cylinder(cfg):
+    """The cylinder OccCylindrical builds for the config."""
+    from projects.occ_cyl.cylindrical import CylinderGrid
+    return CylinderGrid.for_box(cfg.model.point_cloud_range,
+                                **cfg.model.cylinder)
+
+
+def _ring_lidar2img(num_cams, img_h, img_w):
+    """nuScenes-like six-camera ring at the given image size."""
     focal = 1266.0 * img_w / 1600.0
-    cam2img = np.tile(np.eye(4, dtype=np.float32), (num_cams, 1, 1))
+    cam2img = np.tile(np.eye(4), (num_cams, 1, 1))
     cam2img[:, 0, 0] = cam2img[:, 1, 1] = focal
     cam2img[:, 0, 2], cam2img[:, 1, 2] = img_w / 2, img_h / 2
-    lidar2cam = np.zeros((num_cams, 4, 4), np.float32)
+    lidar2cam = np.zeros((num_cams, 4, 4))
     for k, yaw in enumerate(np.deg2rad([0, -55, 55, 180, 110, -110])):
         rot = np.array([[np.sin(yaw), -np.cos(yaw), 0], [0, 0, -1],
                         [np.cos(yaw), np.sin(yaw), 0]])
         lidar2cam[k, :3, :3] = rot
         lidar2cam[k, :3, 3] = -rot @ np.array([1.0, 0.0, 1.5])
         lidar2cam[k, 3, 3] = 1
-    aug = np.tile(np.eye(4, dtype=np.float32), (num_cams, 1, 1))
+    return cam2img, lidar2cam
+
+
+def _geometry(cfg, img_scale=1.0):
+    """One sample's camera metainfo and the padded input size.
+
+    The real calibration of the shared nuScenes frame when it is there and
+    the images are full-size (1600 x 900), else a synthetic ring.
+    """
+    from mmdet3d.structures import Det3DDataSample
+    img_h, img_w = (int(round(s * img_scale)) for s in cfg.img_size)
+    div = cfg.model.data_preprocessor.pad_size_divisor
+    pad_h, pad_w = (math.ceil(s / div) * div for s in (img_h, img_w))
+    num_cams = len(cfg.cam_names)
+    cam2img, lidar2cam = _ring_lidar2img(num_cams, img_h, img_w)
+    source = 'synthetic six-camera ring'
+    if real_sample_dir() and (img_h, img_w) == (900, 1600):
+        cam2img, lidar2cam = (m.numpy() for m in real_cameras())
+        source = 'real nuScenes calibration'
+    aug = np.tile(np.eye(4), (num_cams, 1, 1))
     meta = dict(
         sample_idx=0,
         img_shape=(img_h, img_w),
-        cam2img=cam2img,
-        lidar2cam=lidar2cam,
-        img_aug_matrix=aug,
-        lidar2img=aug @ cam2img @ lidar2cam)
-    return Det3DDataSample(metainfo=meta), (pad_h, pad_w)
+        cam2img=cam2img.astype(np.float32),
+        lidar2cam=lidar2cam.astype(np.float32),
+        img_aug_matrix=aug.astype(np.float32),
+        lidar2img=(aug @ cam2img @ lidar2cam).astype(np.float32))
+    return Det3DDataSample(metainfo=meta), (pad_h, pad_w), source
+
+
+def table6(config):
+    """Table VI counts of a paper config and its d = 2, 10 m ablations.
+
+    Returns:
+        list[dict]: Per config: ``d``, ``points``, ``voxels``, the paper's
+        ``paper_voxels`` and the ``error_pct``.
+    """
+    from projects.occ_cyl.cylindrical import pseudo_point_voxels
+    if not real_sample_dir():
+        raise FileNotFoundError(f'--table6: {MISSING_REASON}')
+    folder, name = osp.split(osp.abspath(config))
+    configs = [config] + [
+        osp.join(folder, pattern.format(name.split('_', 1)[1]))
+        for pattern in TABLE6_ABLATIONS
+    ]
+    lidar2img = real_lidar2img()
+    rows = []
+    for path in configs:
+        cfg = _build_cfg(path)
+        pad_h, pad_w = (math.ceil(s / cfg.model.data_preprocessor
+                                  .pad_size_divisor) *
+                        cfg.model.data_preprocessor.pad_size_divisor
+                        for s in cfg.img_size)
+        stride = cfg.model.img_encoder.out_stride
+        points, voxels = pseudo_point_voxels(
+            _cylinder(cfg), lidar2img, (pad_h, pad_w),
+            (pad_h // stride, pad_w // stride), cfg.model.depth_bound)
+        step = float(cfg.model.depth_bound[2])
+        paper_points, paper_voxels, _ = TABLE6[step]
+        rows.append(
+            dict(config=osp.relpath(path), d=step, points=points,
+                 voxels=voxels, paper_points=paper_points,
+                 paper_voxels=paper_voxels,
+                 error_pct=100.0 * (voxels / paper_voxels - 1)))
+    return rows
 
 
 def measure_lift(config, mode, threads):
     """Child: peak memory and time of lift_max_pool in one mode."""
     torch.set_num_threads(threads)
     cfg = _build_cfg(config)
-    from mmdet3d.registry import MODELS
 
     # The lift's inputs need the plugin's cylinder and geometry helpers and
     # the lift itself; the config's custom_imports has already imported
@@ -111,16 +194,12 @@ def measure_lift(config, mode, threads):
     from projects.occ_common.models.layers import (cartesian_to_cylindrical,
                                                    create_frustum,
                                                    frustum_to_lidar)
-    from projects.occ_cyl.cylindrical import CylinderGrid
     from projects.occ_cyl.lift_pool import lift_max_pool
     model_cfg = cfg.model
-    # The cylinder OccCylindrical builds for its occupancy range.
-    cylinder = CylinderGrid.covering(model_cfg.point_cloud_range,
-                                     model_cfg.cylinder_shape)
-    fusion = MODELS.build(
-        dict(model_cfg.tpv_fusion, fused_lift=mode.startswith('fused'),
-             with_lidar=False, cylinder=cylinder))
-    sample, (pad_h, pad_w) = _paper_geometry(cfg)
+    cylinder = _cylinder(cfg)
+    fusion_cfg = model_cfg.tpv_fusion
+    chunk_size = fusion_cfg.get('lift_chunk_size', 16384)
+    sample, (pad_h, pad_w), source = _geometry(cfg)
     stride = model_cfg.img_encoder.out_stride
     feat_h, feat_w = pad_h // stride, pad_w // stride
     context_channels = model_cfg.depth_net.context_channels
@@ -128,7 +207,10 @@ def measure_lift(config, mode, threads):
                              model_cfg.depth_bound)
     l2i = torch.as_tensor(sample.metainfo['lidar2img'])[None]
     cam_points = frustum_to_lidar(frustum, l2i)
-    voxel_idx = cylinder.flat_index(cartesian_to_cylindrical(cam_points))[0]
+    # As TPVPolarFusion: pool into the occupied voxels only.
+    voxels, rows = cylinder.occupied(
+        cylinder.flat_index(cartesian_to_cylindrical(cam_points)))
+    rows = rows[0]
     del cam_points
     num_bins = frustum.shape[0]
     gen = torch.Generator().manual_seed(0)
@@ -142,27 +224,29 @@ def measure_lift(config, mode, threads):
     context.requires_grad_(backward)
     with PeakMemory() as memory:
         start = time.perf_counter()
-        vol = lift_max_pool(
+        pooled = lift_max_pool(
             depth,
             context,
-            voxel_idx,
-            cylinder.num_voxels,
-            fused=fusion.fused_lift,
-            chunk_size=fusion.lift_chunk_size)
+            rows,
+            voxels.numel(),
+            fused=mode.startswith('fused'),
+            chunk_size=chunk_size)
         if backward:
-            vol.backward(torch.ones_like(vol))
+            pooled.backward(torch.ones_like(pooled))
         seconds = time.perf_counter() - start
     points = depth.numel()
     return dict(
         mode=mode,
+        geometry=source,
         points=points,
         channels=context_channels,
         voxels=cylinder.num_voxels,
-        occupied_voxels=int((vol.detach().abs().sum(1) > 0).sum()),
-        chunk_size=fusion.lift_chunk_size,
+        occupied_voxels=voxels.numel(),
+        chunk_size=chunk_size,
         peak_extra_mib=memory.added_bytes / 2**20,
         naive_feature_tensor_mib=points * context_channels * 4 / 2**20,
-        output_mib=vol.numel() * 4 / 2**20,
+        output_mib=pooled.numel() * 4 / 2**20,
+        dense_volume_mib=cylinder.num_voxels * context_channels * 4 / 2**20,
         seconds=seconds,
         peak_reset=memory.hwm_reset)
 
@@ -173,7 +257,7 @@ def measure_model(config, img_scale, repeat, num_points, threads):
     cfg = _build_cfg(config)
     from mmdet3d.registry import MODELS
     model = MODELS.build(cfg.model).eval()
-    sample, (pad_h, pad_w) = _paper_geometry(cfg, img_scale)
+    sample, (pad_h, pad_w), source = _geometry(cfg, img_scale)
     gen = torch.Generator().manual_seed(0)
     imgs = torch.randn(1, len(cfg.cam_names), 3, pad_h, pad_w, generator=gen)
     # 10 sweeps: uniform in the 100 m box, ground-heavy heights.
@@ -190,12 +274,14 @@ def measure_model(config, img_scale, repeat, num_points, threads):
     params = sum(p.numel() for p in model.parameters())
     return dict(
         mode='model',
+        geometry=source,
         image=(pad_h, pad_w),
         num_points=num_points,
         params_m=params / 1e6,
         first_forward_s=times[0],
         forward_s=float(np.median(times[1:])) if repeat else times[0],
         peak_extra_mib=memory.added_bytes / 2**20,
+        peak_kind=memory.kind,
         threads=threads)
 
 
@@ -210,6 +296,18 @@ def _child(args, mode):
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
+def report_table6(config):
+    """Print the Table VI comparison."""
+    print('Table VI on the real calibration (pseudo points before / '
+          'occupied voxels after the per-voxel max pool):')
+    print(f'{"d (m)":>6s} {"points":>9s} {"voxels":>8s} {"paper":>8s} '
+          f'{"error":>7s}  config')
+    for r in table6(config):
+        print(f'{r["d"]:6.0f} {r["points"]:9d} {r["voxels"]:8d} '
+              f'{r["paper_voxels"]:8d} {r["error_pct"]:+6.1f}%  '
+              f'{r["config"]}')
+
+
 def main():
     args = parse_args()
     if args.child:
@@ -220,15 +318,18 @@ def main():
             out = measure_lift(args.config, args.child, args.threads)
         print(json.dumps(out))
         return
+    if args.table6:
+        report_table6(args.config)
     if not args.skip_lift:
         report_lift(args)
     if args.model:
         r = _child(args, 'model')
-        print(f'whole model: image {r["image"]}, {r["num_points"]} points, '
-              f'{r["params_m"]:.2f} M parameters, forward '
-              f'{r["forward_s"]:.1f} s (first {r["first_forward_s"]:.1f} s) '
-              f'on {r["threads"]} threads, peak +{r["peak_extra_mib"]:.0f} '
-              'MiB')
+        print(f'whole model ({r["geometry"]}): image {r["image"]}, '
+              f'{r["num_points"]} points, {r["params_m"]:.2f} M parameters, '
+              f'forward {r["forward_s"]:.1f} s (first '
+              f'{r["first_forward_s"]:.1f} s) on {r["threads"]} threads, '
+              f'peak +{r["peak_extra_mib"]:.0f} MiB ({r["peak_kind"]}; the '
+              f'paper: {TABLE6[1.0][2]} on an A10 GPU)')
 
 
 def report_lift(args):
@@ -237,17 +338,19 @@ def report_lift(args):
         _child(args, mode) for mode in ('naive', 'fused', 'naive-backward',
                                         'fused-backward')
     ]
-    print(f'{"lift-pool":16s} {"points":>9s} {"C":>4s} {"voxels":>8s} '
+    print(f'lift-pool on the {results[0]["geometry"]}:')
+    print(f'{"mode":16s} {"points":>9s} {"C":>4s} {"voxels":>8s} '
           f'{"peak MiB":>9s} {"time s":>7s}')
     for r in results:
         print(f'{r["mode"]:16s} {r["points"]:9d} {r["channels"]:4d} '
-              f'{r["voxels"]:8d} {r["peak_extra_mib"]:9.1f} '
+              f'{r["occupied_voxels"]:8d} {r["peak_extra_mib"]:9.1f} '
               f'{r["seconds"]:7.2f}')
     r0 = results[0]
     print(f'naive (points x C) feature tensor alone: '
-          f'{r0["naive_feature_tensor_mib"]:.1f} MiB; pooled volume: '
-          f'{r0["output_mib"]:.1f} MiB; occupied voxels: '
-          f'{r0["occupied_voxels"]}')
+          f'{r0["naive_feature_tensor_mib"]:.1f} MiB; pooled rows of the '
+          f'{r0["occupied_voxels"]} occupied voxels: {r0["output_mib"]:.1f} '
+          f'MiB (a dense volume of all {r0["voxels"]} voxels would be '
+          f'{r0["dense_volume_mib"]:.1f} MiB)')
     for fwd, name in ((0, 'forward'), (2, 'forward+backward')):
         ratio = results[fwd + 1]['peak_extra_mib'] / max(
             results[fwd]['peak_extra_mib'], 1e-9)

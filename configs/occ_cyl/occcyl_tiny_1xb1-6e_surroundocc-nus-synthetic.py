@@ -5,7 +5,7 @@
 # width and resolution. For smoke tests and the demo, not for accuracy.
 _base_ = [
     '../_base_/datasets/surroundocc-nus-synthetic.py',
-    '../_base_/cpu_smoke_runtime.py', './_base_/occcyl_r50-swint.py'
+    '../_base_/cpu_smoke_runtime.py', './_base_/occcyl_r50-swins.py'
 ]
 
 custom_imports = dict(
@@ -26,15 +26,19 @@ model = dict(
     # 5 m depth bins (10 bins at 1, 6, ..., 46 m): 6 x 10 x 6 x 10 = 3.6k
     # pseudo points.
     depth_bound=[1.0, 51.0, 5.0],
-    # A quarter of the paper's cylinder per axis (1 m height cells), M = 4.
-    cylinder_shape=[32, 64, 8],
+    # The paper's cylinder range with 15 x 5.75 x 2 times coarser cells:
+    # 32 x 64 x 16 (1.6 m, 5.6 degrees, 0.5 m; every side divisible by the
+    # coarsest Swin stride 16), M = 4.
+    cylinder=dict(shape=[32, 64, 16]),
+    # No download: trained from scratch, so nothing frozen.
+    pretrained=dict(img_backbone=dict(checkpoint=None)),
     img_encoder=dict(
         backbone=dict(
             depth=18,
             base_channels=8,
             frozen_stages=-1,
-            init_cfg=None),  # no download: trained from scratch
-        neck=dict(in_channels=[16, 32, 64], out_channels=_img_channels),
+            norm_eval=False),
+        neck=dict(in_channels=[8, 16, 32, 64], out_channels=_img_channels),
         neck_channels=_img_channels,
         out_channels=_img_channels),
     depth_net=dict(

@@ -24,8 +24,8 @@ model = dict(
     img_backbone=dict(
         depth=18,
         base_channels=8,
-        norm_eval=True,
-        init_cfg=None),  # no download: trained from scratch
+        norm_eval=True),
+    pretrained=None,  # no download: trained from scratch
     img_neck=dict(in_channels=[32, 64], out_channels=_img_channels),
     depth_net=dict(
         in_channels=_img_channels,

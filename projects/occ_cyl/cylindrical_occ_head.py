@@ -83,8 +83,11 @@ class CylindricalOccHead(BaseModule):
     etc.) are converted to ``(r, theta, z)``; each of the three planes of
     that scale is sampled bilinearly at the centre's two coordinates, the
     three samples are summed (eq. 17, TPVFormer's aggregation) and an MLP
-    classifies them. The cylinder must cover every voxel of the grid
-    (checked at construction), so no voxel is sampled outside the planes.
+    classifies them. Either the cylinder covers every voxel of the grid
+    (checked at construction) or it clamps: then a voxel beyond its radius
+    or height is sampled at the border cells (``grid_sample``'s border
+    padding), as PointOcc clamps its voxel centres into the cylinder, and as
+    the cylinder clamps the points.
 
     Args:
         in_channels (int): Channels of the encoded planes.
@@ -122,12 +125,13 @@ class CylindricalOccHead(BaseModule):
                  ignore_index: int = 255,
                  init_cfg: OptMultiConfig = None) -> None:
         super().__init__(init_cfg=init_cfg)
-        if not cylinder.covers_box(point_cloud_range):
+        if not (cylinder.covers_box(point_cloud_range) or cylinder.clamp):
             raise ValueError(
                 f'CylindricalOccHead: the cylinder {cylinder} does not '
                 'cover the occupancy range '
                 f'{tuple(point_cloud_range)}; its radius must reach the '
-                'corners and its azimuth the full circle')
+                'corners and its azimuth the full circle, or it must '
+                'clamp (then voxels outside take the border cells)')
         self.cylinder = cylinder
         self.num_classes = num_classes
         occ_shape = [

@@ -1,5 +1,7 @@
-"""Spatial group pooling: volume -> three TPV-polar planes (eqs. 8-13)."""
-from typing import Tuple
+"""Spatial group pooling: occupied voxels -> three TPV-polar planes (eqs.
+8-13)."""
+import warnings
+from typing import Sequence, Tuple
 
 from mmcv.cnn import ConvModule
 from mmdet3d.registry import MODELS
@@ -7,25 +9,37 @@ from mmdet3d.utils import ConfigType, OptMultiConfig
 from mmengine.model import BaseModule
 from torch import Tensor, nn
 
-# Volume axes of (B, C, R, Theta, Z) pooled away for each plane, in the
-# order the planes are returned: (R, Theta), (Theta, Z), (R, Z).
-PLANE_POOL_AXES = (4, 2, 3)
+#: For the planes in the order they are returned, (R, Theta), (Theta, Z)
+#: and (R, Z): the pooled cylinder axis and the two kept axes, as columns
+#: of the ``(b, i, j, k)`` voxel coordinates (1 = R, 2 = Theta, 3 = Z).
+PLANE_POOL_AXES = ((3, (1, 2)), (1, (2, 3)), (2, (1, 3)))
 
 
 @MODELS.register_module()
 class SpatialGroupPooling(BaseModule):
-    """Compress a cylindrical volume into three planes by group pooling.
+    """Compress the occupied voxels of a cylinder into three planes.
 
     Implements eqs. 8-13 of OccCylindrical (PointOcc's spatial group
-    pooling). Along the pooled axis of length ``L`` the volume is split into
-    ``M`` consecutive groups of ``L / M`` cells, each group is max-pooled,
-    the ``M`` results are concatenated on channels (group-major: channel
-    ``g * C + c`` holds channel ``c`` of group ``g``) and a per-plane MLP
-    (two 1x1 convs) filters them to ``out_channels``. ``M = 1`` is plain
-    max pooling along the axis (Table VII).
+    pooling). Along the pooled axis of length ``L`` the cylinder is split
+    into ``M`` consecutive groups of ``L / M`` cells, each group is
+    max-pooled, the ``M`` results are concatenated on channels
+    (group-major: channel ``g * C + c`` holds channel ``c`` of group ``g``)
+    and a per-plane MLP (two 1x1 convs) filters them to ``out_channels``.
+    ``M = 1`` is plain max pooling along the axis (Table VII).
+
+    The input is the list of occupied voxels (their pooled features and
+    coordinates), never a dense ``(C, R, Theta, Z)`` volume: a group's
+    maximum is taken over its occupied voxels only, as eqs. 8-13 pool over
+    the points. Camera features are signed (the DepthNet context has no
+    final activation), so a zero-filled empty voxel would otherwise win the
+    maximum of a group of negative features: ``[-0.7, -0.3, empty, empty]``
+    pools to -0.3, not 0. A group without any occupied voxel is 0. The
+    gradient of a pooled value reaches the voxel that holds the maximum;
+    voxels of one group that tie exactly share it equally (torch's ``amax``
+    rule).
 
     Args:
-        in_channels (int): Channels ``C`` of the volume.
+        in_channels (int): Channels ``C`` of the voxel features.
         out_channels (int): Channels of each plane.
         num_groups (int): ``M``; must divide ``R``, ``Theta`` and ``Z``.
             Defaults to 8 (the paper).
@@ -55,41 +69,71 @@ class SpatialGroupPooling(BaseModule):
                                                   1)) for _ in PLANE_POOL_AXES
         ])
 
-    def group_pool(self, volume: Tensor, axis: int) -> Tensor:
-        """Group max pooling along one axis, before the MLP (eqs. 8-10).
+    def _check(self, feats: Tensor, coords: Tensor,
+               shape: Sequence[int]) -> None:
+        if feats.dim() != 2 or feats.shape[1] != self.in_channels or \
+                coords.shape != (feats.shape[0], 4):
+            raise ValueError(
+                'SpatialGroupPooling expects voxel features (U, '
+                f'{self.in_channels}) and coordinates (U, 4), got '
+                f'{tuple(feats.shape)} and {tuple(coords.shape)}')
+        for axis, length in zip('R Theta Z'.split(), shape):
+            if length % self.num_groups:
+                raise ValueError(
+                    f'SpatialGroupPooling: the {axis} axis of length '
+                    f'{length} is not divisible into {self.num_groups} '
+                    'groups')
+
+    def group_pool(self, feats: Tensor, coords: Tensor, shape: Sequence[int],
+                   batch_size: int, plane: int) -> Tensor:
+        """Group max pooling into one plane, before the MLP (eqs. 8-10).
 
         Args:
-            volume (Tensor): Shape (B, C, R, Theta, Z).
-            axis (int): Pooled axis, 2 (R), 3 (Theta) or 4 (Z).
+            feats (Tensor): Features of the occupied voxels. Shape (U, C).
+            coords (Tensor): Their ``(b, i, j, k)`` coordinates, int64.
+                Shape (U, 4).
+            shape (Sequence[int]): Cells ``(R, Theta, Z)`` of the cylinder.
+            batch_size (int): Number of samples ``B``.
+            plane (int): 0 (pool Z), 1 (pool R) or 2 (pool Theta).
 
         Returns:
-            Tensor: The two kept axes in order, e.g. for ``axis=4``
-            Shape (B, M * C, R, Theta).
+            Tensor: The two kept axes in order, e.g. for ``plane=0``
+            Shape (B, M * C, R, Theta), 0 where a group has no occupied
+            voxel.
         """
-        if volume.dim() != 5 or volume.shape[1] != self.in_channels:
-            raise ValueError(
-                'SpatialGroupPooling expects a volume (B, '
-                f'{self.in_channels}, R, Theta, Z), got {tuple(volume.shape)}')
-        if axis not in (2, 3, 4):
-            raise ValueError(f'axis must be 2, 3 or 4, got {axis}')
-        length = volume.shape[axis]
+        self._check(feats, coords, shape)
+        if plane not in (0, 1, 2):
+            raise ValueError(f'plane must be 0, 1 or 2, got {plane}')
+        pooled, (kept_a, kept_b) = PLANE_POOL_AXES[plane]
         groups = self.num_groups
-        if length % groups:
-            raise ValueError(f'SpatialGroupPooling: axis {axis} of length '
-                             f'{length} is not divisible into {groups} groups')
-        shape = list(volume.shape)
-        shape[axis:axis + 1] = [groups, length // groups]
-        pooled = volume.reshape(shape).amax(dim=axis + 1)
-        # Move the group axis next to the channels: (B, M, C, a, b).
-        pooled = pooled.movedim(axis, 1)
-        b, m, c, h, w = pooled.shape
-        return pooled.reshape(b, m * c, h, w)
+        size_a, size_b = shape[kept_a - 1], shape[kept_b - 1]
+        group = coords[:, pooled] // (shape[pooled - 1] // groups)
+        cell = ((coords[:, 0] * size_a + coords[:, kept_a]) * size_b +
+                coords[:, kept_b]) * groups + group
+        channels = feats.shape[1]
+        with warnings.catch_warnings():
+            warnings.filterwarnings('ignore', message='index_reduce')
+            # include_self=False: only occupied voxels compete; a cell no
+            # voxel reaches keeps the initial 0.
+            out = feats.new_zeros(batch_size * size_a * size_b * groups,
+                                  channels).index_reduce(
+                                      0, cell, feats, 'amax',
+                                      include_self=False)
+        # (B, a, b, M * C) viewed as (B, M * C, a, b): channels-last strides,
+        # no copy of the largest tensor of the fusion.
+        return out.view(batch_size, size_a, size_b,
+                        groups * channels).permute(0, 3, 1, 2)
 
-    def forward(self, volume: Tensor) -> Tuple[Tensor, Tensor, Tensor]:
+    def forward(self, feats: Tensor, coords: Tensor, shape: Sequence[int],
+                batch_size: int) -> Tuple[Tensor, Tensor, Tensor]:
         """Compute the three TPV-polar planes (eqs. 11-13).
 
         Args:
-            volume (Tensor): Shape (B, C, R, Theta, Z).
+            feats (Tensor): Features of the occupied voxels. Shape (U, C).
+            coords (Tensor): Their ``(b, i, j, k)`` coordinates, int64.
+                Shape (U, 4).
+            shape (Sequence[int]): Cells ``(R, Theta, Z)`` of the cylinder.
+            batch_size (int): Number of samples ``B``.
 
         Returns:
             tuple[Tensor]: Planes (R, Theta), (Theta, Z) and (R, Z):
@@ -97,5 +141,5 @@ class SpatialGroupPooling(BaseModule):
             (B, out_channels, R, Z).
         """
         return tuple(
-            mlp(self.group_pool(volume, axis))
-            for mlp, axis in zip(self.mlps, PLANE_POOL_AXES))
+            mlp(self.group_pool(feats, coords, shape, batch_size, plane))
+            for plane, mlp in enumerate(self.mlps))

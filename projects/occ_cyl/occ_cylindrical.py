@@ -8,11 +8,13 @@ from torch import Tensor
 
 from projects.occ_common.geometry.depth import num_depth_bins
 from projects.occ_common.models.detectors import BaseOccDetector
-from projects.occ_common.models.layers import (cartesian_to_cylindrical,
+from projects.occ_common.models.layers import (POSITION_EMBED_DIMS,
+                                               cartesian_to_cylindrical,
                                                create_frustum,
                                                cylindrical_position_embedding,
                                                frustum_to_lidar)
 from .cylindrical import CylinderGrid
+from .group_pooling import PLANE_POOL_AXES
 
 
 def _img_shape(sample: Det3DDataSample) -> Tuple[int, int]:
@@ -43,12 +45,13 @@ class OccCylindrical(BaseOccDetector):
     eq. 19: the multi-scale occupancy loss plus the LiDAR depth loss.
 
     The detector owns the values its children share and builds them with
-    those values: the cylinder (one :class:`CylinderGrid`, covering
-    ``point_cloud_range``, given to the fusion and the head), the depth
-    bins (``depth_bound``: DepthNet's bin count, the position embedding's
-    ``3 * D`` channels, the depth loss) and the occupancy task (grid,
-    classes and labels, see :class:`BaseOccDetector`). A child config that
-    sets one of them differently is refused.
+    those values: the cylinder (one :class:`CylinderGrid` fitted to
+    ``point_cloud_range``, given to the fusion and the head; the plane
+    encoder must be able to encode its three planes without padding), the
+    depth bins (``depth_bound``: DepthNet's bin count, the position
+    embedding's ``4 * D`` channels, the depth loss) and the occupancy task
+    (grid, classes and labels, see :class:`BaseOccDetector`). A child
+    config that sets one of them differently is refused.
 
     Camera geometry comes from each sample's ``lidar2img`` (or
     ``img_aug_matrix @ cam2img @ lidar2cam``). The data pipeline folds the
@@ -58,7 +61,7 @@ class OccCylindrical(BaseOccDetector):
     Args:
         img_encoder (dict): :class:`MultiViewImageEncoder` config.
         depth_net (dict): :class:`DepthNet` config; its
-            ``position_channels`` defaults to ``3 * D`` (the cylindrical
+            ``position_channels`` defaults to ``4 * D`` (the cylindrical
             position embedding), 0 switches the embedding off (Table V).
         point_branch (dict): :class:`LidarPointBranch` config.
         tpv_fusion (dict): :class:`TPVPolarFusion` config.
@@ -67,8 +70,8 @@ class OccCylindrical(BaseOccDetector):
         point_cloud_range (Sequence[float]): Occupancy grid range, metres.
         voxel_size (Sequence[float]): Occupancy voxel size, metres.
         num_classes (int): Occupancy classes, empty included.
-        cylinder_shape (Sequence[int]): Cells ``(R, Theta, Z)`` of the
-            cylinder.
+        cylinder (dict): ``shape`` (cells ``(R, Theta, Z)``) and optionally
+            ``radius`` and ``clamp`` of :meth:`CylinderGrid.for_box`.
         depth_bound (Sequence[float]): ``(min, max, step)`` of the depth
             bins in metres.
         loss_depth (dict, optional): Depth loss (``DepthBCELoss``); None
@@ -88,7 +91,7 @@ class OccCylindrical(BaseOccDetector):
                  point_cloud_range: Sequence[float],
                  voxel_size: Sequence[float],
                  num_classes: int,
-                 cylinder_shape: Sequence[int],
+                 cylinder: dict,
                  depth_bound: Sequence[float],
                  loss_depth: OptConfigType = None,
                  **kwargs) -> None:
@@ -99,14 +102,19 @@ class OccCylindrical(BaseOccDetector):
             depth_bound=depth_bound,
             loss_depth=loss_depth,
             **kwargs)
-        self.cylinder = CylinderGrid.covering(self.point_cloud_range,
-                                              cylinder_shape)
+        cylinder = dict(cylinder)
+        unknown = set(cylinder) - {'shape', 'radius', 'clamp'}
+        if 'shape' not in cylinder or unknown:
+            raise ValueError('OccCylindrical: cylinder needs shape and may '
+                             f'give radius and clamp, got {cylinder}')
+        self.cylinder = CylinderGrid.for_box(self.point_cloud_range,
+                                             **cylinder)
         num_bins = num_depth_bins(self.depth_bound)
         self.img_encoder = MODELS.build(img_encoder)
         self.depth_net = self.build_child(
             depth_net,
             depth_bound=self.depth_bound,
-            position_channels=3 * num_bins)
+            position_channels=POSITION_EMBED_DIMS * num_bins)
         self.point_branch = MODELS.build(point_branch)
         self.tpv_fusion = self.build_child(tpv_fusion, cylinder=self.cylinder)
         self.tpv_encoder = MODELS.build(tpv_encoder)
@@ -124,11 +132,17 @@ class OccCylindrical(BaseOccDetector):
                 f'OccCylindrical: depth_bound {self.depth_bound} gives '
                 f'{num_bins} bins but depth_net predicts '
                 f'{self.depth_net.num_depth_bins}')
-        if self.depth_net.position_channels not in (0, 3 * num_bins):
+        if self.depth_net.position_channels not in (
+                0, POSITION_EMBED_DIMS * num_bins):
             raise ValueError(
                 'OccCylindrical: depth_net.position_channels must be 0 (no '
-                f'position embedding) or 3 * {num_bins} bins, got '
-                f'{self.depth_net.position_channels}')
+                f'position embedding) or {POSITION_EMBED_DIMS} * {num_bins} '
+                f'bins, got {self.depth_net.position_channels}')
+        for _, kept in PLANE_POOL_AXES:
+            self.tpv_encoder.check_plane_shape(
+                [self.cylinder.shape[a - 1] for a in kept],
+                '(' + ', '.join('R Theta Z'.split()[a - 1]
+                                for a in kept) + ')')
         self.check_child(
             self.occ_head.loss_occ,
             empty_index=self.empty_index,
@@ -187,7 +201,8 @@ class OccCylindrical(BaseOccDetector):
         return dict(logits=logits, depth=depth)
 
     def _inside(self, points: Tensor) -> Tensor:
-        """Keep the points that fall in the cylinder. Shape (P', C)."""
+        """Keep the points that reach a voxel (all finite ones when the
+        cylinder clamps). Shape (P', C)."""
         cyl = cartesian_to_cylindrical(points[:, :3])
         return points[self.cylinder.voxel_coords(cyl)[1]]
 

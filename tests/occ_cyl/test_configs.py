@@ -4,9 +4,11 @@ test_all_configs.py builds every config and compares its model with the
 committed fingerprint; test_tiny_configs.py trains the tiny ones.
 """
 import glob
+import math
 import os.path as osp
 
 import pytest
+import torch
 from mmdet3d.registry import MODELS
 from mmengine.config import Config
 from mmengine.registry import init_default_scope
@@ -16,11 +18,13 @@ from projects.occ_common.testing.config_delta import (coupled_value_mismatches,
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIG_DIR = osp.join(ROOT, 'configs', 'occ_cyl')
-MODEL_BASE = osp.join(CONFIG_DIR, '_base_', 'occcyl_r50-swint.py')
+MODEL_BASE = osp.join(CONFIG_DIR, '_base_', 'occcyl_r50-swins.py')
 MAIN = sorted(glob.glob(osp.join(CONFIG_DIR, '*.py')))
 ABLATIONS = sorted(glob.glob(osp.join(CONFIG_DIR, 'ablations', '*.py')))
-PAPER = osp.join(CONFIG_DIR, 'occcyl_r50-swint_3xb1-24e_surroundocc-nus.py')
-OCC3D = osp.join(CONFIG_DIR, 'occcyl_r50-swint_3xb1-24e_occ3d-nus.py')
+PAPER = osp.join(CONFIG_DIR, 'occcyl_r50-swins_3xb1-24e_surroundocc-nus.py')
+OCC3D = osp.join(CONFIG_DIR, 'occcyl_r50-swins_3xb1-24e_occ3d-nus.py')
+LITE = osp.join(CONFIG_DIR,
+                'occcyl-lite_r50-swint_3xb1-24e_surroundocc-nus.py')
 TINY = osp.join(CONFIG_DIR, 'occcyl_tiny_1xb1-6e_surroundocc-nus-synthetic.py')
 
 #: What each config changes in the model of the config it builds on.
@@ -29,6 +33,14 @@ DELTAS = {
     # Dataset configs on the model base: the coupled values only.
     PAPER: (MODEL_BASE, COUPLED),
     OCC3D: (MODEL_BASE, COUPLED | {'loss_mask_key'}),
+    # The lighter model: the slimmer widths, nothing else.
+    LITE: (PAPER, {
+        'img_encoder.backbone.out_indices', 'img_encoder.neck.in_channels',
+        'img_encoder.neck.num_outs', 'img_encoder.num_levels',
+        'img_encoder.out_channels', 'depth_net.in_channels',
+        'depth_net.mid_channels', 'tpv_encoder.backbone.depths',
+        'tpv_encoder.backbone.drop_path_rate'
+    }),
     # Table V (3), VI (2) and VII (3): one knob each.
     'occcyl-nodepthsup': (PAPER, {'loss_depth'}),
     'occcyl-nodepthfeat': (PAPER, {'depth_net.with_depth_feature'}),
@@ -46,14 +58,16 @@ def _name(path):
 
 
 def test_config_inventory():
-    """The paper's config, its Occ3D variant, the tiny synthetic config and
-    the deltas of Tables V (3 files), VI (2) and VII (3)."""
-    assert set(MAIN) == {PAPER, OCC3D, TINY}
-    assert {_name(p) for p in ABLATIONS} | {PAPER, OCC3D} == set(DELTAS)
+    """The paper's config, its Occ3D variant, the lighter model, the tiny
+    synthetic config and the deltas of Tables V (3 files), VI (2) and VII
+    (3)."""
+    assert set(MAIN) == {PAPER, OCC3D, LITE, TINY}
+    assert {_name(p) for p in ABLATIONS} | {PAPER, OCC3D, LITE} == set(DELTAS)
 
 
 @pytest.mark.parametrize(
-    'path', [PAPER, OCC3D] + ABLATIONS, ids=lambda p: osp.basename(p)[:-3])
+    'path', [PAPER, OCC3D, LITE] + ABLATIONS,
+    ids=lambda p: osp.basename(p)[:-3])
 def test_each_delta_changes_only_its_documented_keys(path):
     """Compared with the config it builds on, a config changes exactly the
     model keys listed in DELTAS."""
@@ -85,9 +99,12 @@ def test_ablation_knobs():
 
 
 def test_paper_model_parameter_count(capsys):
-    """The paper config builds a ResNet-50 image backbone: 23,508,032
-    parameters (torchvision's 25,557,032 minus the 2048 x 1000 + 1000 fc).
-    The total is printed for the report, next to the paper's 111.62 M."""
+    """Issue 11, item 5. Table IV: 111.62 M parameters. The paper config
+    lands within 3 %: ResNet-50 23,508,032 (torchvision's 25,557,032 minus
+    the 2048 x 1000 + 1000 fc), Swin-S 48.88 M (its 49.6 M ImageNet model
+    without the 0.77 M classifier, with a 128-channel 2 x 2 patch
+    embedding), BEVDepth's 512-wide DepthNet 28.4 M. The count by module is
+    printed for the report."""
     cfg = Config.fromfile(PAPER)
     init_default_scope(cfg.default_scope)
     model = MODELS.build(cfg.model)
@@ -99,7 +116,61 @@ def test_paper_model_parameter_count(capsys):
     }
     total = sum(p.numel() for p in model.parameters())
     assert total == sum(parts.values())
+    assert abs(total / 111.62e6 - 1) <= 0.03
     with capsys.disabled():
+        error = 100 * (total / 111.62e6 - 1)
         print(f'\nOccCylindrical paper config: {total / 1e6:.2f} M '
-              f'parameters (paper: 111.62 M); ' +
-              ', '.join(f'{k} {v / 1e6:.2f} M' for k, v in parts.items() if v))
+              f'parameters (paper: 111.62 M, {error:+.1f} %); ' +
+              ', '.join(f'{k} {v / 1e6:.2f} M'
+                        for k, v in parts.items() if v))
+
+
+def test_image_neck_takes_stages_0_to_3():
+    """Issue 11, item 4 (Sec. IV.A: stages 0, 1, 2 and 3 feed the FPN). A
+    64 x 64 image reaches the FPN as four maps of 256, 512, 1024 and 2048
+    channels at strides 4, 8, 16, 32 (16, 8, 4, 2 cells), and all four FPN
+    levels are fused into V (512 channels at 1/16: 4 x 4)."""
+    cfg = Config.fromfile(PAPER)
+    init_default_scope(cfg.default_scope)
+    encoder = MODELS.build(cfg.model.img_encoder).eval()
+    seen = []
+    encoder.neck.register_forward_pre_hook(
+        lambda module, args: seen.extend(tuple(x.shape) for x in args[0]))
+    with torch.no_grad():
+        v = encoder(torch.zeros(1, 1, 3, 64, 64))
+    assert seen == [(1, 256, 16, 16), (1, 512, 8, 8), (1, 1024, 4, 4),
+                    (1, 2048, 2, 2)]
+    assert encoder.num_levels == 4
+    assert tuple(v.shape) == (1, 512, 4, 4)
+
+
+@pytest.mark.parametrize('path', [PAPER, OCC3D],
+                         ids=lambda p: osp.basename(p)[:-3])
+def test_paper_configs_load_the_key_frame_and_9_sweeps(path):
+    """Issue 11, item 8: "10 LiDAR sweeps" as the authors' OccFusion code
+    loads them, the key frame and 9 sweeps (sweeps_num=9), in training and
+    testing."""
+    cfg = Config.fromfile(path)
+    assert cfg.sweeps_num == 9
+    for pipeline in (cfg.train_pipeline, cfg.test_pipeline,
+                     cfg.train_dataloader.dataset.pipeline,
+                     cfg.val_dataloader.dataset.pipeline):
+        sweeps = [t for t in pipeline
+                  if t.type == 'LoadOccPointsFromMultiSweeps']
+        assert [t.sweeps_num for t in sweeps] == [9]
+
+
+def test_paper_cylinder_is_pointocc_with_swin_friendly_azimuth():
+    """PointOcc's cylinder, r in [0, 50] m, theta in [-pi, pi], z in
+    [-5, 3] m, outside points clamped; 480 x 368 x 32 cells (368 = 16 x 23
+    so that the coarsest Swin level, stride 16, covers the azimuth exactly)
+    and M = 8 divides every side."""
+    cfg = Config.fromfile(PAPER)
+    init_default_scope(cfg.default_scope)
+    model = MODELS.build(cfg.model)
+    cyl = model.cylinder
+    assert cyl.shape == (480, 368, 32) and cyl.clamp
+    assert cyl.cyl_range == pytest.approx(
+        (0.0, -math.pi, -5.0, 50.0, math.pi, 3.0))
+    assert model.tpv_encoder.level_strides == (2, 4, 8, 16)
+    assert all(side % 16 == 0 and side % 8 == 0 for side in cyl.shape)

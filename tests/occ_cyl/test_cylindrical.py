@@ -4,9 +4,11 @@ import math
 import pytest
 import torch
 
+from projects.occ_common.testing.occ_inputs import ring_camera_rig
 from projects.occ_cyl.cylindrical import (CylinderGrid,
                                           cartesian_to_cylindrical,
-                                          cylindrical_to_cartesian)
+                                          cylindrical_to_cartesian,
+                                          pseudo_point_voxels)
 
 PI = math.pi
 
@@ -120,3 +122,65 @@ def test_bad_specs_raise():
         CylinderGrid((4, 4, 2), (5, -PI, -1, 4, PI, 1))
     with pytest.raises(ValueError, match='2\\*pi'):
         CylinderGrid((4, 4, 2), (0, -PI, -1, 4, PI + 1, 1))
+
+
+def test_clamp_puts_outside_points_into_the_border_voxels():
+    """PointOcc's clamp on the (4, 4, 2) grid: r = 4 (= r_max) and r = 9
+    go to ring i = 3; z = 1 (= z_max) and z = 7 to k = 1, z = -1.5 to
+    k = 0; theta still wraps (pi -> j = 0). (9, 0, 7) -> (3, 2, 1) ->
+    flat (3 * 4 + 2) * 2 + 1 = 29; (4, pi, -1.5) -> (3, 0, 0) -> 24. Only
+    a NaN is outside."""
+    grid = CylinderGrid((4, 4, 2), (0.0, -PI, -1.0, 4.0, PI, 1.0),
+                        clamp=True)
+    cyl = torch.tensor([[9.0, 0.0, 7.0], [4.0, PI, -1.5], [1.0, 0.0, 1.0],
+                        [float('nan'), 0.0, 0.0]], dtype=torch.float64)
+    coords, inside = grid.voxel_coords(cyl)
+    assert coords[:3].tolist() == [[3, 2, 1], [3, 0, 0], [1, 2, 1]]
+    assert inside.tolist() == [True, True, True, False]
+    assert grid.flat_index(cyl).tolist() == [29, 24, 13, -1]
+
+
+def test_for_box_inscribed_is_pointocc_cylinder():
+    """SurroundOcc's box x, y in [-50, 50], z in [-5, 3]: the inscribed
+    radius is 50 m, PointOcc's r in [0, 50]; Occ3D's +-40 m gives 40 m.
+    The circumscribed fit is covering()'s 70.72 m."""
+    box = (-50.0, -50.0, -5.0, 50.0, 50.0, 3.0)
+    grid = CylinderGrid.for_box(box, (480, 368, 32), 'inscribed', True)
+    assert grid.cyl_range == pytest.approx((0.0, -PI, -5.0, 50.0, PI, 3.0))
+    assert grid.clamp and not grid.covers_box(box)
+    occ3d = CylinderGrid.for_box((-40, -40, -1, 40, 40, 5.4), (8, 8, 8),
+                                 'inscribed')
+    assert occ3d.cyl_range[3] == 40.0 and not occ3d.clamp
+    wide = CylinderGrid.for_box(box, (8, 8, 8))
+    assert wide.cyl_range[3] == pytest.approx(50 * 2**0.5 + 0.01)
+    with pytest.raises(ValueError, match='radius must be one of'):
+        CylinderGrid.for_box(box, (8, 8, 8), 'outer')
+
+
+def test_occupied_compacts_and_unravel_inverts():
+    """Flat indices (21, -1, 0, 21, 53) of the (4, 4, 2) grid: occupied
+    voxels (0, 21, 53) and rows (1, -1, 0, 1, 2); 53 = 32 + 21 is voxel
+    (2, 2, 1) of sample 1 -> (b, i, j, k) = (1, 2, 2, 1)."""
+    grid = _grid()
+    voxels, rows = grid.occupied(torch.tensor([21, -1, 0, 21, 53]))
+    assert voxels.tolist() == [0, 21, 53]
+    assert rows.tolist() == [1, -1, 0, 1, 2]
+    assert grid.unravel(voxels).tolist() == [[0, 0, 0, 0], [0, 2, 2, 1],
+                                             [1, 2, 2, 1]]
+    none, rows = grid.occupied(torch.tensor([-1, -1]))
+    assert none.numel() == 0 and rows.tolist() == [-1, -1]
+
+
+def test_pseudo_point_voxels_hand_computed():
+    """One camera at the origin looking along +x, a 16 x 16 image seen as a
+    1 x 1 feature map (its cell centre is the principal point, so the ray
+    is the x axis) and bins (1, 5, 0.5): 8 pseudo points at x = 1, 1.5,
+    ..., 4.5 m. In the (4, 4, 2) grid (dr = 1 m, r < 4) they fall in rings
+    1, 1, 2, 2, 3, 3 and two beyond 4 m: 8 points, 3 occupied voxels (the
+    far two dropped, or clamped into ring 3)."""
+    cam2img, lidar2cam = ring_camera_rig(1, (16, 16), focal=16.0)
+    lidar2img = cam2img @ lidar2cam
+    for clamp in (False, True):
+        grid = CylinderGrid((4, 4, 2), (0.0, -PI, -1.0, 4.0, PI, 1.0), clamp)
+        assert pseudo_point_voxels(grid, lidar2img, (16, 16), (1, 1),
+                                   (1.0, 5.0, 0.5)) == (8, 3)

@@ -113,3 +113,25 @@ def test_cylinder_must_cover_the_grid():
                                                 1.0)))
     with pytest.raises(ValueError, match='2 output scales'):
         _head()([()])
+
+
+def test_clamping_cylinder_samples_the_border_ring_beyond_its_radius():
+    """PointOcc's cylinder of radius 4 (inscribed in the +-4 m box, corners
+    at 5.66 m) is accepted when it clamps. Plane (R, Theta) of 4 x 8 cells
+    holding the ring index i everywhere, the other planes 0: the corner
+    voxel centre (3, 3) at r = 4.24 > 4 samples ring 3 (border), the voxel
+    (1, 1) at r = 1.41 samples between rings 1 and 2: r / dr - 0.5 = 0.91
+    -> 0.91 (bilinear)."""
+    clamped = CylinderGrid.for_box(PC_RANGE, (4, 8, 2), 'inscribed', True)
+    head = _head(cylinder=clamped, in_channels=1)
+    ring = torch.arange(4.0).view(1, 1, 4, 1).expand(1, 1, 4, 8)
+    planes = (ring, torch.zeros(1, 1, 8, 2), torch.zeros(1, 1, 4, 2))
+    centres = head.centres_0
+    sampled = sample_plane(planes[0], centres[:, [0, 1]], False, True)
+    xyz = voxel_centres(PC_RANGE, (4, 4, 2))
+    r = xyz[:, :2].norm(dim=1)
+    corner = (r > 4).nonzero()[0, 0]
+    assert sampled[0, 0, corner].item() == pytest.approx(3.0)
+    near = (r < 1.5).nonzero()[0, 0]
+    assert sampled[0, 0, near].item() == pytest.approx(
+        float(r[near]) - 0.5, abs=1e-5)

@@ -4,6 +4,8 @@ import torch
 
 from projects.occ_cyl import SpatialGroupPooling
 
+SHAPE = (2, 4, 4)  # (R, Theta, Z)
+
 
 def _volume():
     """(B=1, C=2, R=2, Theta=4, Z=4): channel 0 holds
@@ -14,8 +16,19 @@ def _volume():
     return torch.stack([v, -v])[None]
 
 
+def _rows(volume, mask=None):
+    """The occupied voxels of a dense volume as (features (U, C),
+    coordinates (U, 4)); ``mask`` (B, R, Theta, Z) marks the occupied
+    ones (all by default)."""
+    if mask is None:
+        mask = torch.ones(volume.shape[:1] + volume.shape[2:], dtype=bool)
+    coords = mask.nonzero()
+    feats = volume.permute(0, 2, 3, 4, 1)[mask]
+    return feats, coords
+
+
 def test_group_pool_hand_computed_planes():
-    """M = 2, channel g * C + c = channel c of group g.
+    """All voxels occupied, M = 2, channel g * C + c = channel c of group g.
 
     Along Z (groups z in {0, 1}, {2, 3}): channel 0 of group g is
     100 r + 10 t + (2 g + 1), channel 1 is -(100 r + 10 t + 2 g).
@@ -24,9 +37,9 @@ def test_group_pool_hand_computed_planes():
     -(100 r + 10 (2 g) + z).
     """
     pool = SpatialGroupPooling(2, 3, num_groups=2)
-    vol = _volume()
+    feats, coords = _rows(_volume())
     r, t = torch.meshgrid(torch.arange(2.), torch.arange(4.), indexing='ij')
-    z_planes = pool.group_pool(vol, 4)
+    z_planes = pool.group_pool(feats, coords, SHAPE, 1, 0)
     assert z_planes.shape == (1, 4, 2, 4)
     for g in range(2):
         torch.testing.assert_close(z_planes[0, 2 * g],
@@ -34,14 +47,14 @@ def test_group_pool_hand_computed_planes():
         torch.testing.assert_close(z_planes[0, 2 * g + 1],
                                    -(100 * r + 10 * t + 2 * g))
     t2, z2 = torch.meshgrid(torch.arange(4.), torch.arange(4.), indexing='ij')
-    r_planes = pool.group_pool(vol, 2)
+    r_planes = pool.group_pool(feats, coords, SHAPE, 1, 1)
     assert r_planes.shape == (1, 4, 4, 4)
     for g in range(2):
         torch.testing.assert_close(r_planes[0, 2 * g], 100 * g + 10 * t2 + z2)
         torch.testing.assert_close(r_planes[0, 2 * g + 1],
                                    -(100 * g + 10 * t2 + z2))
     r3, z3 = torch.meshgrid(torch.arange(2.), torch.arange(4.), indexing='ij')
-    t_planes = pool.group_pool(vol, 3)
+    t_planes = pool.group_pool(feats, coords, SHAPE, 1, 2)
     assert t_planes.shape == (1, 4, 2, 4)
     for g in range(2):
         torch.testing.assert_close(t_planes[0, 2 * g],
@@ -54,9 +67,43 @@ def test_one_group_is_plain_max_pooling():
     """M = 1 (Table VII): along Z the plane is max_z v = 100 r + 10 t + 3."""
     pool = SpatialGroupPooling(2, 3, num_groups=1)
     r, t = torch.meshgrid(torch.arange(2.), torch.arange(4.), indexing='ij')
-    plane = pool.group_pool(_volume(), 4)
+    plane = pool.group_pool(*_rows(_volume()), SHAPE, 1, 0)
     torch.testing.assert_close(plane[0, 0], 100 * r + 10 * t + 3)
     torch.testing.assert_close(plane[0, 1], -(100 * r + 10 * t))
+
+
+def test_empty_voxels_never_win_a_group():
+    """Issue 11, item 2. One Z column (r = 0, t = 0) of 4 cells, M = 1:
+    cells z = 0, 1 hold -0.7 and -0.3, z = 2, 3 are empty. The group's
+    maximum is over the occupied cells: max(-0.7, -0.3) = -0.3 (a dense,
+    zero-filled volume gave max(-0.7, -0.3, 0, 0) = 0.0). The column
+    (r = 1, t = 2) has no occupied cell at all and pools to 0; so does every
+    other column. Its gradient reaches the winner (z = 1) only: 1 there, 0
+    on z = 0."""
+    pool = SpatialGroupPooling(1, 3, num_groups=1)
+    feats = torch.tensor([[-0.7], [-0.3]], requires_grad=True)
+    coords = torch.tensor([[0, 0, 0, 0], [0, 0, 0, 1]])
+    plane = pool.group_pool(feats, coords, SHAPE, 1, 0)
+    assert plane.shape == (1, 1, 2, 4)
+    expected = torch.zeros(1, 1, 2, 4)
+    expected[0, 0, 0, 0] = -0.3
+    torch.testing.assert_close(plane, expected)
+    plane[0, 0, 0, 0].backward()
+    assert feats.grad.flatten().tolist() == [0.0, 1.0]
+
+
+def test_two_groups_with_empty_cells_and_a_second_sample():
+    """M = 2 along Z for sample 1 of a batch of 2: column (r = 1, t = 3)
+    holds -2 at z = 0 (group 0) and -5, -4 at z = 2, 3 (group 1) -> channels
+    (g = 0, g = 1) = (-2, -4); sample 0 stays all 0."""
+    pool = SpatialGroupPooling(1, 3, num_groups=2)
+    feats = torch.tensor([[-2.0], [-5.0], [-4.0]])
+    coords = torch.tensor([[1, 1, 3, 0], [1, 1, 3, 2], [1, 1, 3, 3]])
+    plane = pool.group_pool(feats, coords, SHAPE, 2, 0)
+    assert plane.shape == (2, 2, 2, 4)
+    assert plane[1, :, 1, 3].tolist() == [-2.0, -4.0]
+    assert plane[0].abs().sum() == 0
+    assert plane.abs().sum() == 6.0
 
 
 def test_forward_shapes_and_backward():
@@ -65,33 +112,44 @@ def test_forward_shapes_and_backward():
     only: summing channel 0 of both Z groups puts 1 on z = 1 and z = 3 of
     each of the 2 x 4 (r, t) cells, i.e. 8 per z slice, 0 on z = 0, 2."""
     pool = SpatialGroupPooling(2, 3, num_groups=2)
-    vol = _volume().requires_grad_()
-    planes = pool(vol)
+    feats, coords = _rows(_volume())
+    feats.requires_grad_()
+    planes = pool(feats, coords, SHAPE, 1)
     assert [tuple(p.shape) for p in planes] == [(1, 3, 2, 4), (1, 3, 4, 4),
                                                 (1, 3, 2, 4)]
     sum(p.sum() for p in planes).backward()
     assert pool.mlps[1][0].conv.weight.grad is not None
-    vol2 = _volume().requires_grad_()
-    pool.group_pool(vol2, 4)[:, 0::2].sum().backward()
-    grad_z = vol2.grad[0, 0].sum(dim=(0, 1))
-    assert grad_z.tolist() == [0.0, 8.0, 0.0, 8.0]
+    feats2, coords2 = _rows(_volume())
+    feats2.requires_grad_()
+    pool.group_pool(feats2, coords2, SHAPE, 1, 0)[:, 0::2].sum().backward()
+    grad = torch.zeros(4)
+    grad.index_add_(0, coords2[:, 3], feats2.grad[:, 0])
+    assert grad.tolist() == [0.0, 8.0, 0.0, 8.0]
 
 
-def test_empty_batch():
-    """A batch of zero volumes gives zero-sized planes."""
+def test_no_voxel_and_empty_batch():
+    """No occupied voxel gives all-zero planes; a batch of zero samples
+    zero-sized planes."""
     pool = SpatialGroupPooling(2, 3, num_groups=2).eval()
-    planes = pool(torch.zeros(0, 2, 2, 4, 4))
+    empty = torch.zeros(0, 2), torch.zeros(0, 4, dtype=torch.long)
+    assert pool.group_pool(*empty, SHAPE, 1, 0).abs().sum() == 0
+    planes = pool(*empty, SHAPE, 0)
     assert planes[0].shape == (0, 3, 2, 4)
 
 
 def test_bad_inputs_raise():
-    """Indivisible axes, wrong channels and a bad axis are named."""
-    pool = SpatialGroupPooling(2, 3, num_groups=3)
+    """Indivisible axes, wrong channels or coordinates and a bad plane are
+    named."""
+    feats, coords = _rows(_volume())
     with pytest.raises(ValueError, match='not divisible into 3 groups'):
-        pool.group_pool(_volume(), 4)
-    with pytest.raises(ValueError, match=r'\(B, 2, R, Theta, Z\)'):
-        pool.group_pool(torch.zeros(1, 3, 3, 3, 3), 4)
-    with pytest.raises(ValueError, match='axis'):
-        pool.group_pool(torch.zeros(1, 2, 3, 3, 3), 1)
+        SpatialGroupPooling(2, 3, num_groups=3).group_pool(
+            feats, coords, SHAPE, 1, 0)
+    pool = SpatialGroupPooling(2, 3, num_groups=2)
+    with pytest.raises(ValueError, match=r'\(U, 2\)'):
+        pool.group_pool(feats[:, :1], coords, SHAPE, 1, 0)
+    with pytest.raises(ValueError, match=r'coordinates \(U, 4\)'):
+        pool.group_pool(feats, coords[:, :3], SHAPE, 1, 0)
+    with pytest.raises(ValueError, match='plane'):
+        pool.group_pool(feats, coords, SHAPE, 1, 3)
     with pytest.raises(ValueError, match='num_groups'):
         SpatialGroupPooling(2, 3, num_groups=0)

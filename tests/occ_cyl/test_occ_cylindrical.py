@@ -22,7 +22,7 @@ CFG = dict(
     point_cloud_range=PC_RANGE,
     voxel_size=VOXEL,
     num_classes=4,
-    cylinder_shape=[8, 16, 4],
+    cylinder=dict(shape=[8, 16, 4]),
     depth_bound=DEPTH_BOUND,
     img_encoder=dict(
         type='MultiViewImageEncoder',
@@ -182,19 +182,45 @@ def test_fused_and_naive_lift_give_the_same_model_output():
 def test_one_owner_of_the_shared_values():
     """The detector builds one cylinder covering (-8, 8)^2 (radius
     8 sqrt(2) + 0.01 m) and hands that same object to the fusion and the
-    head; DepthNet predicts the 6 bins of depth_bound with 3 * 6 = 18
-    position channels, and the loss terms get empty_index 2 / ignore 7."""
+    head; DepthNet predicts the 6 bins of depth_bound with 4 * 6 = 24
+    position channels (r, sin, cos, z), and the loss terms get empty_index
+    2 / ignore 7."""
     model = _build(empty_index=2, ignore_index=7)
     assert model.tpv_fusion.cylinder is model.cylinder
     assert model.occ_head.cylinder is model.cylinder
     assert model.cylinder.shape == (8, 16, 4)
     assert model.cylinder.cyl_range[3] == pytest.approx(8 * 2**0.5 + 0.01)
     assert model.depth_net.num_depth_bins == NUM_BINS
-    assert model.depth_net.position_channels == 3 * NUM_BINS
+    assert model.depth_net.position_channels == 4 * NUM_BINS
     assert model.loss_depth.depth_bound == tuple(DEPTH_BOUND)
     assert model.occ_head.scale_shapes == [(8, 8, 4), (4, 4, 2)]
     sem = model.occ_head.loss_occ.losses[3]
     assert (sem.empty_index, sem.ignore_index) == (2, 7)
+
+
+def test_inscribed_clamping_cylinder_trains():
+    """PointOcc's cylinder: radius 8 m (the inscribed circle of
+    (-8, 8)^2), points and output voxels beyond it clamped into the
+    outer ring. The head accepts it although the corners (11.3 m) lie
+    outside, and every parameter still gets a gradient."""
+    model = _build(cylinder=dict(radius='inscribed', clamp=True))
+    assert model.cylinder.cyl_range[3] == 8.0 and model.cylinder.clamp
+    data = _data(model, True, batch_size=1, num_points=(30, ))
+    sum(model(**data, mode='loss').values()).backward()
+    no_grad = [n for n, p in model.named_parameters()
+               if p.requires_grad and p.grad is None]
+    assert no_grad == []
+
+
+def test_cylinder_the_plane_encoder_would_pad_is_refused():
+    """Issue 11, item 6, at construction: the test Swin's coarsest level
+    has stride 2, so a 15-cell azimuth (levels 15 and 8 cells, the second
+    covering 16) is refused, naming the plane and the level."""
+    with pytest.raises(ValueError, match=r'\(R, Theta\) plane \(8, 15\).*'
+                       r'level 1.*cover 16 cells'):
+        _build(cylinder=dict(shape=[8, 15, 4]), tpv_fusion=dict(num_groups=1))
+    with pytest.raises(ValueError, match='cylinder needs shape'):
+        _build(cylinder=dict(shape=[8, 16, 4], size=3))
 
 
 def test_bad_inputs_raise():

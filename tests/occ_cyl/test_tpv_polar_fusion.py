@@ -19,45 +19,84 @@ def _fusion(**kwargs):
     return TPVPolarFusion(**cfg)
 
 
-def test_camera_volume_hand_computed():
+def test_camera_voxels_hand_computed():
     """Two pseudo points (1 camera, 2 bins, 1x1 pixel): bin 0 at
     (x, y, z) = (1.5, 0, 0.5) -> r = 1.5, theta = 0, z = 0.5 -> voxel
-    (1, 2, 1); bin 1 at (0, 2.5, -0.5) -> r = 2.5, theta = pi / 2 -> voxel
-    (2, 3, 0). depth = (0.25, 0.75), context = (2, -4):
-    voxel (1, 2, 1) = 0.25 * (2, -4) = (0.5, -1) and voxel (2, 3, 0) =
-    0.75 * (2, -4) = (1.5, -3); every other voxel is 0. The naive path gives
-    the same volume."""
+    (1, 2, 1), flat (1 * 4 + 2) * 2 + 1 = 13; bin 1 at (0, 2.5, -0.5) ->
+    r = 2.5, theta = pi / 2 -> voxel (2, 3, 0), flat (2 * 4 + 3) * 2 = 22.
+    depth = (0.25, 0.75), context = (2, -4): voxel 13 holds
+    0.25 * (2, -4) = (0.5, -1) and voxel 22 holds 0.75 * (2, -4) =
+    (1.5, -3). Only these two occupied voxels are returned (no dense
+    volume); the naive path gives the same rows."""
     fusion = _fusion()
     depth = torch.tensor([0.25, 0.75]).view(1, 2, 1, 1)
     ctx = torch.tensor([2.0, -4.0]).view(1, 2, 1, 1)
     pts = torch.tensor([[1.5, 0.0, 0.5], [0.0, 2.5, -0.5]]).view(
         1, 1, 2, 1, 1, 3)
-    vol = fusion.camera_volume(depth, ctx, pts)
-    assert vol.shape == (1, 2, 4, 4, 2)
-    expected = torch.zeros(1, 2, 4, 4, 2)
-    expected[0, :, 1, 2, 1] = torch.tensor([0.5, -1.0])
-    expected[0, :, 2, 3, 0] = torch.tensor([1.5, -3.0])
-    assert torch.equal(vol, expected)
-    naive = _fusion(fused_lift=False).camera_volume(depth, ctx, pts)
-    assert torch.equal(naive, expected)
+    feats, voxels = fusion.camera_voxels(depth, ctx, pts)
+    assert voxels.tolist() == [13, 22]
+    assert feats.tolist() == [[0.5, -1.0], [1.5, -3.0]]
+    naive = _fusion(fused_lift=False).camera_voxels(depth, ctx, pts)
+    assert torch.equal(naive[0], feats) and torch.equal(naive[1], voxels)
 
 
-def test_lidar_volume_hand_computed_and_batch_offsets():
+def test_lidar_voxels_hand_computed_and_batch_offsets():
     """Sample 0: points (1.5, 0, 0.5) with features (1, 2, 3) and
-    (1.2, 0.1, 0.2) with (4, 0, -1) share voxel (1, 2, 1) -> (4, 2, 3);
-    a point at r = 10 is outside and dropped. Sample 1: (0, -0.5, -0.5)
-    (theta = -pi / 2 -> j = 1) with (7, 7, 7) -> voxel (0, 1, 0) of
-    sample 1 only."""
+    (1.2, 0.1, 0.2) with (4, 0, -1) share voxel (1, 2, 1) = flat 13 ->
+    (4, 2, 3); a point at r = 10 is outside and dropped. Sample 1:
+    (0, -0.5, -0.5) (theta = -pi / 2 -> j = 1) with (7, 7, 7) -> voxel
+    (0, 1, 0) = flat 2, plus 32 voxels per sample = 34."""
     fusion = _fusion()
     xyz = [torch.tensor([[1.5, 0.0, 0.5], [1.2, 0.1, 0.2], [10., 0., 0.]]),
            torch.tensor([[0.0, -0.5, -0.5]])]
     feats = [torch.tensor([[1., 2., 3.], [4., 0., -1.], [9., 9., 9.]]),
              torch.tensor([[7., 7., 7.]])]
-    vol = fusion.lidar_volume(feats, xyz)
-    expected = torch.zeros(2, 3, 4, 4, 2)
-    expected[0, :, 1, 2, 1] = torch.tensor([4., 2., 3.])
-    expected[1, :, 0, 1, 0] = 7.0
-    assert torch.equal(vol, expected)
+    pooled, voxels = fusion.lidar_voxels(feats, xyz)
+    assert voxels.tolist() == [13, 34]
+    assert pooled.tolist() == [[4., 2., 3.], [7., 7., 7.]]
+
+
+def test_clamping_cylinder_pools_outside_points_into_the_border():
+    """With a clamping cylinder (PointOcc) the point at r = 10 of the test
+    above is not dropped: r is clamped into ring i = 3 (r in [3, 4)), theta
+    0 -> j = 2, z = 0 -> k = 1: flat (3 * 4 + 2) * 2 + 1 = 29, features
+    (9, 9, 9)."""
+    clamped = CylinderGrid(CYLINDER.shape, CYLINDER.cyl_range, clamp=True)
+    fusion = _fusion(cylinder=clamped)
+    xyz = [torch.tensor([[1.5, 0.0, 0.5], [10., 0., 0.]])]
+    feats = [torch.tensor([[1., 2., 3.], [9., 9., 9.]])]
+    pooled, voxels = fusion.lidar_voxels(feats, xyz)
+    assert voxels.tolist() == [13, 29]
+    assert pooled.tolist() == [[1., 2., 3.], [9., 9., 9.]]
+
+
+def test_plane_gradient_reaches_exactly_the_winning_point():
+    """Two pseudo points in one Z group (M = 2 over Z = 2 cells means one
+    cell per group, so use the Theta plane: voxels (1, 2, 1) and (1, 3, 1)
+    fall in Theta group 1 of cell (r = 1, z = 1)). Context (2, -4) times
+    depths 0.25 (bin 0, theta 0 -> j = 2) and 0.75 (bin 1, theta pi / 2 ->
+    j = 3): channel 0 is 0.5 vs 1.5, so bin 1 wins; channel 1 is -1 vs -3,
+    so bin 0 wins. d(plane channel 0) / d depth = context 2 at bin 1 only,
+    d(plane channel 1) / d depth = -4 at bin 0 only."""
+    fusion = _fusion()
+    depth = torch.tensor([0.25, 0.75]).view(1, 2, 1, 1).requires_grad_()
+    ctx = torch.tensor([2.0, -4.0]).view(1, 2, 1, 1)
+    pts = torch.tensor([[1.5, 0.0, 0.5], [0.0, 1.5, 0.5]]).view(
+        1, 1, 2, 1, 1, 3)
+    feats, voxels = fusion.camera_voxels(depth, ctx, pts)
+    plane = fusion.cam_pool.group_pool(feats,
+                                       CYLINDER.unravel(voxels),
+                                       CYLINDER.shape, 1, 2)
+    # Channels g * C + c: group 1, channel 0 is channel 2.
+    assert plane[0, 2:, 1, 1].tolist() == [1.5, -1.0]
+    plane[0, 2, 1, 1].backward()
+    assert depth.grad.flatten().tolist() == [0.0, 2.0]
+    depth.grad = None
+    feats, voxels = fusion.camera_voxels(depth, ctx, pts)
+    plane = fusion.cam_pool.group_pool(feats, CYLINDER.unravel(voxels),
+                                       CYLINDER.shape, 1, 2)
+    plane[0, 3, 1, 1].backward()
+    assert depth.grad.flatten().tolist() == [-4.0, 0.0]
 
 
 def _inputs(batch=2, cams=2, points=(6, 0)):
@@ -102,4 +141,4 @@ def test_single_modality_and_errors():
     with pytest.raises(ValueError, match='at least one'):
         _fusion(with_camera=False, with_lidar=False)
     with pytest.raises(ValueError, match='does not match'):
-        _fusion().camera_volume(depth[:1], ctx[:1], cam_pts)
+        _fusion().camera_voxels(depth[:1], ctx[:1], cam_pts)

@@ -44,8 +44,16 @@ model = dict(
         norm_cfg=dict(type='BN', requires_grad=True),
         norm_eval=False,
         style='pytorch',
-        # ImageNet weights, as BEVDet-Occ; set to None to train from scratch.
-        init_cfg=dict(type='Pretrained', checkpoint='torchvision://resnet50')),
+        init_cfg=None),  # weights: `pretrained` below
+    # ImageNet weights, as BEVDet-Occ, loaded and checked without
+    # torchvision (README, "Pretrained weights"); checkpoint=None trains
+    # from scratch.
+    pretrained=dict(
+        img_backbone=dict(
+            module='img_backbone',
+            checkpoint='torchvision://resnet50',
+            style='pytorch',
+            ignore=[r'^fc\.'])),  # the ImageNet classifier
     img_neck=dict(
         type='mmdet.FPN',
         in_channels=[1024, 2048],

@@ -1,5 +1,5 @@
 """Models shared by the occupancy plugins: the base detector, losses,
-layers and the sparse backend."""
-from . import detectors, layers, losses, sparse
+layers, the sparse backend and checked pretrained-weight loading."""
+from . import detectors, layers, losses, pretrained, sparse
 
-__all__ = ['detectors', 'layers', 'losses', 'sparse']
+__all__ = ['detectors', 'layers', 'losses', 'pretrained', 'sparse']

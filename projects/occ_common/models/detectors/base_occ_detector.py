@@ -10,7 +10,9 @@ occupancy model of this library, so that it is written once:
   config states them once, at the top of ``model``;
 * the depth bins (``depth_bound``) and the LiDAR depth loss ``loss_depth``;
 * reading the data samples: stacked metainfo matrices, camera parameters,
-  ground-truth fields and the occupancy targets, masked in one place.
+  ground-truth fields and the occupancy targets, masked in one place;
+* pretrained weights of its parts (``pretrained``), loaded and checked by
+  :mod:`projects.occ_common.models.pretrained` after the initialisation.
 """
 from typing import Dict, List, Optional, Sequence, Tuple
 
@@ -25,6 +27,7 @@ from torch import Tensor, nn
 
 from ...geometry.depth import num_depth_bins
 from ..layers.camera_geometry import camera_parameter_vector, lidar2img_matrix
+from ..pretrained import check_entries, load_pretrained
 
 #: Metainfo keys whose product is ``lidar2img`` (see camera_geometry).
 CAMERA_KEYS = ('cam2img', 'lidar2cam', 'img_aug_matrix')
@@ -49,6 +52,10 @@ class BaseOccDetector(Base3DDetector):
             to every module that lifts or predicts depth. Defaults to None.
         loss_depth (dict, optional): Depth loss (``DepthBCELoss``); None
             removes the depth supervision. Defaults to None.
+        pretrained (dict, optional): Entry name -> where and what to load
+            (``module`` path, ``checkpoint``, ...; see
+            :mod:`projects.occ_common.models.pretrained`), applied by
+            :meth:`init_weights`. Defaults to None (nothing).
         data_preprocessor (dict, optional): ``Det3DDataPreprocessor``
             config. Defaults to None.
         init_cfg (dict, optional): Initialisation config. Defaults to None.
@@ -63,11 +70,13 @@ class BaseOccDetector(Base3DDetector):
                  loss_mask_key: Optional[str] = None,
                  depth_bound: Optional[Sequence[float]] = None,
                  loss_depth: OptConfigType = None,
+                 pretrained: Optional[dict] = None,
                  data_preprocessor: OptConfigType = None,
                  init_cfg: OptMultiConfig = None) -> None:
         super().__init__(
             data_preprocessor=data_preprocessor, init_cfg=init_cfg)
         name = type(self).__name__
+        self.pretrained = check_entries(pretrained)
         if len(point_cloud_range) != 6 or len(voxel_size) != 3:
             raise ValueError(f'{name}: point_cloud_range needs 6 values and '
                              f'voxel_size 3, got {point_cloud_range} and '
@@ -95,6 +104,29 @@ class BaseOccDetector(Base3DDetector):
             self.depth_bound = tuple(float(v) for v in depth_bound)
         self.loss_depth = self.build_child(loss_depth,
                                            depth_bound=self.depth_bound)
+
+    def init_weights(self) -> None:
+        """Initialise every part, then load the ``pretrained`` entries.
+
+        The entries load last so that no child's own initialisation
+        overwrites them; an entry without a checkpoint only checks that its
+        part trains normally (nothing frozen).
+
+        Raises:
+            ValueError: For an entry whose ``module`` is not a part of this
+                detector, and from
+                :func:`~projects.occ_common.models.pretrained.load_pretrained`.
+        """
+        super().init_weights()
+        for name, entry in self.pretrained.items():
+            try:
+                part = self.get_submodule(entry['module'])
+            except AttributeError as err:
+                raise ValueError(
+                    f'{type(self).__name__}: pretrained.{name} names module '
+                    f'{entry["module"]!r}, which this model does not have'
+                ) from err
+            load_pretrained(part, name, entry, self.data_preprocessor)
 
     # ------------------------------------------------------------------
     # Building children from the shared values

@@ -99,24 +99,34 @@ def frustum_to_lidar(frustum: Tensor, lidar2img: Tensor) -> Tensor:
     return pts[..., :3]
 
 
+#: Channels of :func:`cylindrical_position_embedding` per depth bin.
+POSITION_EMBED_DIMS = 4
+
+
 def cylindrical_position_embedding(points: Tensor,
                                    cyl_range: Sequence[float]) -> Tensor:
-    """Normalised cylindrical coordinates of the frustum: ``V_coord`` (eq. 5).
+    """Cylindrical coordinates of the frustum: ``V_coord`` (eq. 5).
 
-    Each bin's working-frame point is converted to ``(r, theta, z)`` and
-    scaled to ``[0, 1]`` by the cylinder range (values outside the range go
-    beyond ``[0, 1]`` unchanged so the network still sees them). The ``D``
-    bins are stacked on channels, as in PETR's 3D position embedding.
+    Each bin's working-frame point becomes ``(r', sin theta, cos theta,
+    z')`` with ``r'`` and ``z'`` scaled to ``[0, 1]`` by the cylinder range
+    (values outside the range go beyond ``[0, 1]`` unchanged so the network
+    still sees them). The azimuth is encoded by its sine and cosine rather
+    than scaled: ``(theta + pi) / 2 pi`` jumps from 1 to 0 across
+    ``theta = +-pi``, the car's left side in the nuScenes LiDAR frame, so
+    neighbouring feature columns of CAM_BACK_LEFT would differ by 1.0. The
+    paper does not say how it encodes theta; sine and cosine are continuous
+    and, as a pair, still identify the angle. The ``D`` bins are stacked on
+    channels, as in PETR's 3D position embedding.
 
     Args:
         points (Tensor): From :func:`frustum_to_lidar`.
             Shape (B, N, D, h, w, 3).
         cyl_range (Sequence[float]): ``(r_min, theta_min, z_min, r_max,
-            theta_max, z_max)``.
+            theta_max, z_max)``; the azimuth range is not used.
 
     Returns:
-        Tensor: Embedding. Shape (B * N, D * 3, h, w), channel ``3 * k + i``
-        holding coordinate ``i`` of bin ``k``.
+        Tensor: Embedding. Shape (B * N, D * 4, h, w), channel ``4 * k + i``
+        holding ``(r', sin theta, cos theta, z')[i]`` of bin ``k``.
     """
     if points.dim() != 6 or points.shape[-1] != 3:
         raise ValueError('points must be (B, N, D, h, w, 3), got '
@@ -127,9 +137,13 @@ def cylindrical_position_embedding(points: Tensor,
     hi = points.new_tensor(cyl_range[3:])
     if bool((hi <= lo).any()):
         raise ValueError(f'cyl_range needs max > min per axis: {cyl_range}')
-    cyl = (cartesian_to_cylindrical(points) - lo) / (hi - lo)
-    b, n, d, h, w, _ = cyl.shape
-    return cyl.permute(0, 1, 2, 5, 3, 4).reshape(b * n, d * 3, h, w)
+    r, theta, z = cartesian_to_cylindrical(points).unbind(-1)
+    emb = torch.stack([(r - lo[0]) / (hi[0] - lo[0]),
+                       torch.sin(theta),
+                       torch.cos(theta), (z - lo[2]) / (hi[2] - lo[2])],
+                      dim=-1)
+    b, n, d, h, w, c = emb.shape
+    return emb.permute(0, 1, 2, 5, 3, 4).reshape(b * n, d * c, h, w)
 
 
 def camera_parameter_vector(cam2img: Tensor, lidar2cam: Tensor,

@@ -5,7 +5,8 @@ import pytest
 import torch
 
 from projects.occ_common.geometry.depth import project_points
-from projects.occ_common.models.layers import (camera_parameter_vector,
+from projects.occ_common.models.layers import (POSITION_EMBED_DIMS,
+                                               camera_parameter_vector,
                                                create_frustum,
                                                cylindrical_position_embedding,
                                                frustum_to_lidar,
@@ -72,21 +73,42 @@ def test_augmentation_is_inverted_by_the_lift():
 
 def test_position_embedding_values_and_layout():
     """Points (3, 4, 0) and (0, -2, 1) in a cylinder r in [0, 10],
-    theta in [-pi, pi], z in [-1, 1] normalise to
-    (0.5, (atan2(4, 3) + pi) / (2 pi), 0.5) and (0.2, 0.25, 1.0); bin k's
-    coordinate i sits in channel 3 k + i."""
+    theta in [-pi, pi], z in [-1, 1] embed as (r / 10, sin theta,
+    cos theta, (z + 1) / 2) = (0.5, 0.8, 0.6, 0.5) and (0.2, -1, 0, 1.0);
+    bin k's value i sits in channel 4 k + i."""
     pts = torch.tensor([[3.0, 4.0, 0.0], [0.0, -2.0, 1.0]],
                        dtype=torch.float64)
     pts = pts.view(1, 1, 2, 1, 1, 3)  # B, N, D=2, h, w
     emb = cylindrical_position_embedding(pts,
                                          (0, -math.pi, -1, 10, math.pi, 1))
-    assert emb.shape == (1, 6, 1, 1)
-    theta = (math.atan2(4, 3) + math.pi) / (2 * math.pi)
-    expected = torch.tensor([0.5, theta, 0.5, 0.2, 0.25, 1.0],
+    assert emb.shape == (1, 2 * POSITION_EMBED_DIMS, 1, 1)
+    expected = torch.tensor([0.5, 0.8, 0.6, 0.5, 0.2, -1.0, 0.0, 1.0],
                             dtype=torch.float64)
     torch.testing.assert_close(emb.view(-1), expected)
     with pytest.raises(ValueError, match='cyl_range'):
         cylindrical_position_embedding(pts, (0, 0, 0, 1, 1))
+
+
+def test_position_embedding_has_no_seam_behind_the_left_side():
+    """Issue 11, item 3. Two neighbouring feature columns either side of
+    theta = +-pi (the car's left in the nuScenes LiDAR frame, seen by
+    CAM_BACK_LEFT): points (-10, +0.05, 0) and (-10, -0.05, 0), theta =
+    +-(pi - 0.005). Their embeddings differ only in sin theta, by
+    2 sin(0.005) = 0.0100; scaled as (theta + pi) / (2 pi) they differed by
+    (2 pi - 0.01) / (2 pi) = 0.998. Two columns 0.1 m apart at 10 m on the
+    front side (theta = +-0.005) differ by the same 0.0100."""
+    pts = torch.tensor([[-10.0, 0.05, 0.0], [-10.0, -0.05, 0.0],
+                        [10.0, 0.05, 0.0], [10.0, -0.05, 0.0]],
+                       dtype=torch.float64).view(1, 1, 1, 1, 4, 3)
+    emb = cylindrical_position_embedding(pts,
+                                         (0, -math.pi, -1, 20, math.pi, 1))
+    seam = (emb[0, :, 0, 0] - emb[0, :, 0, 1]).abs()
+    front = (emb[0, :, 0, 2] - emb[0, :, 0, 3]).abs()
+    step = 2 * math.sin(math.atan2(0.05, 10.0))
+    torch.testing.assert_close(
+        seam, torch.tensor([0.0, step, 0.0, 0.0], dtype=torch.float64))
+    torch.testing.assert_close(seam, front)
+    assert float(seam.max()) < 0.011
 
 
 def test_camera_parameter_vector():

@@ -1,9 +1,9 @@
 # OccCylindrical (camera + LiDAR) on SurroundOcc-nuScenes as in the paper:
-# the model and schedule of _base_/occcyl_r50-swint.py, 1600x900 images,
-# 10 LiDAR sweeps, 3 GPUs x 1 sample.
+# the model and schedule of _base_/occcyl_r50-swins.py, 1600x900 images,
+# 10 LiDAR frames (the key frame + 9 sweeps), 3 GPUs x 1 sample.
 _base_ = [
     '../_base_/datasets/surroundocc-nus.py', '../_base_/default_runtime.py',
-    './_base_/occcyl_r50-swint.py'
+    './_base_/occcyl_r50-swins.py'
 ]
 
 custom_imports = dict(
@@ -15,12 +15,19 @@ model = _base_.occ_task
 
 # The dataset base crops to BEVDet's 256x704; the paper feeds 1600x900.
 img_size = (900, 1600)
-_full_size = dict(MultiViewImageAug=dict(final_size=img_size))
+# "10 LiDAR sweeps": the authors' OccFusion code loads the key frame and 9
+# sweeps (LoadPointsFromMultiSweeps(sweeps_num=9)), 10 frames in all.
+sweeps_num = 9
+_paper_inputs = dict(
+    MultiViewImageAug=dict(final_size=img_size),
+    LoadOccPointsFromMultiSweeps=dict(sweeps_num=sweeps_num))
 train_pipeline = [
-    dict(t, **_full_size.get(t['type'], {})) for t in _base_.train_pipeline
+    dict(t, **_paper_inputs.get(t['type'], {}))
+    for t in _base_.train_pipeline
 ]
 test_pipeline = [
-    dict(t, **_full_size.get(t['type'], {})) for t in _base_.test_pipeline
+    dict(t, **_paper_inputs.get(t['type'], {}))
+    for t in _base_.test_pipeline
 ]
 train_dataloader = dict(dataset=dict(pipeline=train_pipeline))
 val_dataloader = dict(dataset=dict(pipeline=test_pipeline))
