@@ -9,7 +9,7 @@ import torch
 from mmdet3d.registry import MODELS
 
 from projects.occ_common.geometry.bev_warp import warp_bev
-from projects.occ_common.testing.occ_inputs import make_occ_batch
+from projects.occ_common.testing.occ_inputs import make_temporal_scene
 from tests.sdg_occ.test_sdg_occ import CAM_CHANNELS, PC_RANGE, _batch, _cfg
 
 
@@ -24,37 +24,25 @@ def translation(tx):
     return mat
 
 
-def frame(seed, token, prev_token, prev2curr=None, batch_size=1):
-    """One key frame of a scene: its own inputs plus the link to the
-    frame before (its images and matrices are that frame's own)."""
-    inputs, samples = make_occ_batch(
-        batch_size=batch_size, num_cams=2, img_shape=(32, 64),
-        num_points=(40, ), occ_shape=(8, 8, 4), pc_range=PC_RANGE,
-        seed=seed)
-    for sample in samples:
-        sample.set_metainfo(dict(token=token, prev_tokens=[prev_token]))
-        sample.gt_seg_2d = torch.where(sample.gt_depth > 0,
-                                       torch.ones_like(sample.gt_depth).long(),
-                                       torch.full_like(sample.gt_depth,
-                                                       255).long())
-    return inputs, samples
+def scene(num_key_frames=3, step=2.0):
+    """Key frames of one scene in the T = 2 layout, 2 m forward each (the
+    first repeats itself); 2D labels 1 where a point projects."""
+    frames = make_temporal_scene(
+        num_key_frames, step, num_cams=2, img_shape=(32, 64),
+        num_points=(40, ), occ_shape=(8, 8, 4), pc_range=PC_RANGE)
+    for _, samples in frames:
+        for sample in samples:
+            depth = sample.gt_depth
+            sample.gt_seg_2d = torch.where(
+                depth > 0, torch.ones_like(depth).long(),
+                torch.full_like(depth, 255).long())
+    return frames
 
 
-def two_frames(current, previous, prev2curr):
-    """A T = 2 sample: ``current``'s frame with ``previous`` as t-1."""
-    (inputs, samples), (p_inputs, p_samples) = current, previous
-    inputs = dict(inputs, imgs=torch.cat([inputs['imgs'],
-                                          p_inputs['imgs']], 1))
-    for sample, prev in zip(samples, p_samples):
-        meta = prev.metainfo
-        sample.set_metainfo(dict(
-            prev2curr=np.asarray(prev2curr)[None],
-            prev_cam2img=meta['cam2img'][None],
-            prev_lidar2cam=meta['lidar2cam'][None],
-            prev_img_aug_matrix=meta['img_aug_matrix'][None],
-            prev_lidar2img=meta['lidar2img'][None],
-            prev_points=[p_inputs['points'][0].numpy()]))
-    return inputs, samples
+def own_frame(frame):
+    """A T = 2 key frame's own (current) inputs, as a single frame."""
+    inputs, samples = frame
+    return dict(inputs, imgs=inputs['imgs'][:, :2]), samples
 
 
 def test_one_frame_is_the_single_frame_model():
@@ -89,11 +77,10 @@ def test_previous_frame_is_warped_into_the_fusion():
         bn.reset_parameters()
         bn.reset_running_stats()
     bn.eps = 0.0
-    cur, prev = frame(1, 'b', 'a'), frame(2, 'a', 'a')
-    inputs, samples = two_frames(cur, prev, translation(-4.0))
+    frames = scene(2, step=4.0)
     with torch.no_grad():
-        _, cam = model.extract_camera_bev(inputs, samples)
-        _, own = model.frame_camera_bev(*prev)
+        _, cam = model.extract_camera_bev(*frames[1])
+        _, own = model.frame_camera_bev(*own_frame(frames[0]))
     expected = warp_bev(own['bev'], torch.from_numpy(translation(-4.0))[None],
                         PC_RANGE).relu()
     assert torch.allclose(cam['bev'], expected, atol=1e-5)
@@ -107,8 +94,7 @@ def test_two_frames_train_and_distil_the_fused_bev():
     temporal reduction conv (the student is the fused camera BEV); the
     previous frame's images change the prediction."""
     model = _model('kl', num_frames=2).train()
-    inputs, samples = two_frames(frame(1, 'b', 'a'), frame(2, 'a', 'a'),
-                                 translation(-2.0))
+    inputs, samples = scene(2)[1]
     losses = model(inputs, samples, mode='loss')
     assert all(torch.isfinite(v) for v in losses.values())
     losses['loss_distill'].backward()
@@ -122,17 +108,11 @@ def test_two_frames_train_and_distil_the_fused_bev():
 
 
 def test_cache_equals_recomputation_on_a_three_frame_scene():
-    """Frames a, b, c of one scene (a repeats itself as its previous
+    """Key frames 0, 1, 2 of one scene (0 repeats itself as its previous
     frame, then 2 m forward per frame). With the cache each frame's image
     backbone runs once (3 calls), without it twice (6 calls); the
     predictions are equal."""
-    frames = {t: frame(s, t, p) for t, s, p in
-              (('a', 1, 'a'), ('b', 2, 'a'), ('c', 3, 'b'))}
-    scene = [
-        two_frames(frames['a'], frame(1, 'a', 'a'), np.eye(4)),
-        two_frames(frames['b'], frame(1, 'a', 'a'), translation(-2.0)),
-        two_frames(frames['c'], frame(2, 'b', 'a'), translation(-2.0)),
-    ]
+    frames = scene(3)
     results = {}
     for cached in (False, True):
         model = _model('camera', num_frames=2, test_cache=cached).eval()
@@ -140,12 +120,12 @@ def test_cache_equals_recomputation_on_a_three_frame_scene():
         model.img_backbone.register_forward_pre_hook(
             lambda *args: calls.append(1))
         with torch.no_grad():
-            results[cached] = [model(i, s, mode='tensor') for i, s in scene]
+            results[cached] = [model(i, s, mode='tensor') for i, s in frames]
         assert len(calls) == (3 if cached else 6)
     for a, b in zip(results[False], results[True]):
         assert torch.equal(a, b)
     model.train()
-    assert model.bev_cache.get(['c']) is None  # emptied on train()
+    assert model.bev_cache.get(['frame2-0']) is None  # emptied on train()
 
 
 def test_bad_temporal_inputs_are_refused():
