@@ -12,12 +12,15 @@ num_frames = 2
 model = dict(num_frames=num_frames)
 
 # The previous frames get the current frame's augmentation; their LiDAR
-# points guide their SDG lift, as the current frame's do. Inserted just
-# before PackOccInputs: after the BEV augmentation and the ego frame.
+# points guide their SDG lift, as the current frame's do, with its filters
+# (ego box, range). Inserted just before PackOccInputs: after the BEV
+# augmentation and the ego frame.
 _previous = dict(
     type='LoadPreviousKeyFrames',
     num_frames=num_frames,
     load_points=True,
+    ego_box=_base_.ego_box,
+    point_cloud_range=_base_.point_cloud_range,
     backend_args=_base_.backend_args)
 train_dataloader = dict(
     dataset=dict(

@@ -7,7 +7,11 @@ num_frames = 2
 model = dict(num_frames=num_frames)
 
 _previous = dict(
-    type='LoadPreviousKeyFrames', num_frames=num_frames, load_points=True)
+    type='LoadPreviousKeyFrames',
+    num_frames=num_frames,
+    load_points=True,
+    ego_box=_base_.ego_box,
+    point_cloud_range=_base_.point_cloud_range)
 train_dataloader = dict(
     dataset=dict(
         num_frames=num_frames,

@@ -14,13 +14,14 @@ image augmentation parameters of each view, and the BEV augmentation
 frame, ``W`` being the identity (LiDAR working frame) or the frame's own
 ``lidar2ego`` (after ``PointsToEgoFrame``).
 """
-from typing import Optional
+from typing import Optional, Sequence
 
 import numpy as np
 from mmcv.transforms import BaseTransform
 from mmdet3d.registry import TRANSFORMS
 
 from .image_aug import augment_view
+from .ego_points import in_ego_box
 from .image_loading import LoadMultiViewImagesOcc
 from .points_loading import read_points_file
 
@@ -37,6 +38,12 @@ class LoadPreviousKeyFrames(BaseTransform):
         load_points (bool): Also load each previous key frame's LiDAR
             points (for a view transform guided by LiDAR depth, SDG-OCC's).
             Defaults to False.
+        ego_box (Sequence[float], optional): Drop the previous frames'
+            points in this ego-frame box, as ``RemoveEgoPoints`` does for
+            the current frame. Defaults to None (keep them).
+        point_cloud_range (Sequence[float], optional): Keep the previous
+            frames' points strictly inside it (working frame), as
+            ``PointsRangeFilter`` does. Defaults to None (keep all).
         backend_args (dict, optional): mmengine file backend arguments.
         scale_calibration (bool): As :class:`LoadMultiViewImagesOcc`.
             Defaults to False.
@@ -67,6 +74,8 @@ class LoadPreviousKeyFrames(BaseTransform):
     def __init__(self,
                  num_frames: int,
                  load_points: bool = False,
+                 ego_box: Optional[Sequence[float]] = None,
+                 point_cloud_range: Optional[Sequence[float]] = None,
                  backend_args: Optional[dict] = None,
                  scale_calibration: bool = False) -> None:
         if num_frames < 2:
@@ -74,6 +83,12 @@ class LoadPreviousKeyFrames(BaseTransform):
                              f'got {num_frames}')
         self.num_frames = int(num_frames)
         self.load_points = load_points
+        # The same point filters as the current frame's: a frame's camera
+        # BEV is then the same whether it is computed as the current frame
+        # or as a previous one, which the test-time cache relies on.
+        self.ego_box = None if ego_box is None else list(ego_box)
+        self.point_cloud_range = (None if point_cloud_range is None else
+                                  np.asarray(point_cloud_range, np.float64))
         self.backend_args = backend_args
         self.scale_calibration = scale_calibration
 
@@ -138,9 +153,7 @@ class LoadPreviousKeyFrames(BaseTransform):
                     frame['lidar_path'], int(frame['num_pts_feats']),
                     f'LiDAR points of key frame {frame["token"]}',
                     self.backend_args)
-                pts[:, :3] = (pts[:, :3].astype(np.float64) @ to_work[:3, :3].T
-                              + to_work[:3, 3]).astype(np.float32)
-                points.append(pts)
+                points.append(self._previous_points(pts, frame, to_work))
         results['img'] = imgs
         for key, value in out.items():
             results[key] = value if key == 'prev_tokens' else np.stack(value)
@@ -148,8 +161,26 @@ class LoadPreviousKeyFrames(BaseTransform):
             results['prev_points'] = points
         return results
 
+    def _previous_points(self, pts: np.ndarray, frame: dict,
+                         to_work: np.ndarray) -> np.ndarray:
+        """A previous frame's points (P, C) in its working frame, with the
+        current frame's filters."""
+        if self.ego_box is not None:
+            pts = pts[~in_ego_box(pts[:, :3], frame['lidar2ego'],
+                                  self.ego_box)]
+        xyz = pts[:, :3].astype(np.float64) @ to_work[:3, :3].T \
+            + to_work[:3, 3]
+        pts[:, :3] = xyz.astype(np.float32)
+        if self.point_cloud_range is not None:
+            lo, hi = self.point_cloud_range[:3], self.point_cloud_range[3:]
+            inside = np.all((pts[:, :3] > lo) & (pts[:, :3] < hi), axis=1)
+            pts = pts[inside]
+        return pts
+
     def __repr__(self) -> str:
         """str: The transform and its arguments."""
         return (f'{self.__class__.__name__}(num_frames={self.num_frames}, '
                 f'load_points={self.load_points}, '
+                f'ego_box={self.ego_box}, '
+                f'point_cloud_range={self.point_cloud_range}, '
                 f'scale_calibration={self.scale_calibration})')
