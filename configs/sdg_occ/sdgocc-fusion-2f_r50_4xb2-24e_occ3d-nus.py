@@ -22,14 +22,14 @@ _previous = dict(
     ego_box=_base_.ego_box,
     point_cloud_range=_base_.point_cloud_range,
     backend_args=_base_.backend_args)
+train_pipeline = _base_.train_pipeline_seg2d[:-1] + [
+    _previous, _base_.train_pipeline_seg2d[-1]
+]
+test_pipeline = _base_.test_pipeline_seg2d[:-1] + [
+    _previous, _base_.test_pipeline_seg2d[-1]
+]
 train_dataloader = dict(
-    dataset=dict(
-        num_frames=num_frames,
-        pipeline=_base_.train_pipeline_seg2d[:-1] +
-        [_previous, _base_.train_pipeline_seg2d[-1]]))
+    dataset=dict(num_frames=num_frames, pipeline=train_pipeline))
 val_dataloader = dict(
-    dataset=dict(
-        num_frames=num_frames,
-        pipeline=_base_.test_pipeline_seg2d[:-1] +
-        [_previous, _base_.test_pipeline_seg2d[-1]]))
+    dataset=dict(num_frames=num_frames, pipeline=test_pipeline))
 test_dataloader = val_dataloader

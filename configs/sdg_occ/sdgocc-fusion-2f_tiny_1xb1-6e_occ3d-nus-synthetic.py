@@ -12,14 +12,14 @@ _previous = dict(
     load_points=True,
     ego_box=_base_.ego_box,
     point_cloud_range=_base_.point_cloud_range)
+train_pipeline = _base_.train_pipeline[:-1] + [
+    _previous, _base_.train_pipeline[-1]
+]
+test_pipeline = _base_.test_pipeline[:-1] + [
+    _previous, _base_.test_pipeline[-1]
+]
 train_dataloader = dict(
-    dataset=dict(
-        num_frames=num_frames,
-        pipeline=_base_.train_pipeline[:-1] +
-        [_previous, _base_.train_pipeline[-1]]))
+    dataset=dict(num_frames=num_frames, pipeline=train_pipeline))
 val_dataloader = dict(
-    dataset=dict(
-        num_frames=num_frames,
-        pipeline=_base_.test_pipeline[:-1] +
-        [_previous, _base_.test_pipeline[-1]]))
+    dataset=dict(num_frames=num_frames, pipeline=test_pipeline))
 test_dataloader = val_dataloader

@@ -346,7 +346,7 @@ class SDGOcc(BaseOccDetector):
                 f'SDGOcc(num_frames={self.num_frames}): inputs["imgs"] holds '
                 f'{imgs.shape[1]} views, expected T * N = {self.num_frames} '
                 f'* {views} (the current frame\'s views, then each previous '
-                "frame's, as LoadPreviousFrames stacks them)")
+                "frame's, as LoadPreviousKeyFrames stacks them)")
         frames = imgs.unflatten(1, (self.num_frames, -1))
         depth_out, cam = self.frame_camera_bev(
             dict(inputs, imgs=frames[:, 0]), data_samples)

@@ -7,7 +7,7 @@ camera BEV is computed in its own ego frame, the previous ones are warped
 into the current frame (:func:`warp_bev`), concatenated after the current
 one and reduced back to C channels by a small conv.
 
-Frame layout of a T-frame sample (written by ``LoadPreviousFrames``):
+Frame layout of a T-frame sample (written by ``LoadPreviousKeyFrames``):
 ``imgs`` (B, T * N, 3, H, W) holds the current frame's N views first, then
 frame t-1, t-2, ...; the metainfo holds, for the T-1 previous frames,
 ``prev_tokens``, ``prev2curr`` (T-1, 4, 4), ``prev_cam2img``,
@@ -101,7 +101,7 @@ def frame_samples(samples: Sequence[Det3DDataSample],
         missing = [key for key in PREV_CAMERA_KEYS if key not in meta]
         if missing:
             raise ValueError(f'SDGOcc(num_frames > 1): data sample {name} '
-                             f'lacks {missing}; add LoadPreviousFrames to '
+                             f'lacks {missing}; add LoadPreviousKeyFrames to '
                              'the pipeline and pack its keys')
         frame = {}
         for key, own in PREV_CAMERA_KEYS.items():
@@ -127,7 +127,7 @@ def frame_points(samples: Sequence[Det3DDataSample], k: int,
             raise ValueError(
                 f'data sample {sample.metainfo.get("sample_idx", i)} has no '
                 f'prev_points for frame t-{k}: the SDG lift of a previous '
-                'frame needs its LiDAR points (LoadPreviousFrames('
+                'frame needs its LiDAR points (LoadPreviousKeyFrames('
                 'load_points=True))')
         points.append(torch.as_tensor(np.asarray(prev[k - 1]),
                                       dtype=torch.float32, device=device))

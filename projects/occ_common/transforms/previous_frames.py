@@ -20,8 +20,8 @@ import numpy as np
 from mmcv.transforms import BaseTransform
 from mmdet3d.registry import TRANSFORMS
 
-from .image_aug import augment_view
 from .ego_points import in_ego_box
+from .image_aug import augment_view
 from .image_loading import LoadMultiViewImagesOcc
 from .points_loading import read_points_file
 
