@@ -28,9 +28,10 @@ def synthetic_root(tmp_path_factory):
 
 
 def test_every_model_has_a_tiny_config():
-    """OccCylindrical, SDG-Fusion and SDG-KL."""
+    """OccCylindrical, SDG-Fusion (single-frame and over two key
+    frames) and SDG-KL."""
     assert [osp.basename(p).split('_')[0] for p in TINY] == [
-        'occcyl', 'sdgocc-fusion', 'sdgocc-kl'
+        'occcyl', 'sdgocc-fusion-2f', 'sdgocc-fusion', 'sdgocc-kl'
     ]
 
 

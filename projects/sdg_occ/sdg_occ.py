@@ -23,15 +23,22 @@ channel-to-height occupancy head.
 The camera BEV is one step, :meth:`SDGOcc.extract_camera_bev`: the view
 transform pools the lifted features, then a learned 3x3 conv-BN
 (``camera_bev_conv``) gives the BEV that the fusion, the head and FOAD see.
+With ``num_frames`` T > 1 (the T-frame input of Sec. 3.1) that step also
+warps the previous frames' camera BEVs into the current frame and reduces
+the T of them to one (:mod:`.temporal_fusion`); everything after it is
+unchanged, so SDG-KL distils into the temporally fused camera BEV.
 """
 from typing import Dict, List, Optional, Sequence, Tuple
 
+import torch
 from mmdet3d.registry import MODELS
 from torch import Tensor, nn
 
 from projects.occ_common.models.detectors import BaseOccDetector
 from .c2h_head import height_logits_to_xyz
 from .seg_targets import downsample_seg_labels
+from .temporal_fusion import (FrameBEVCache, TemporalBEVFusion, frame_points,
+                              frame_samples)
 
 _VARIANTS = ('camera', 'fusion', 'kl')
 
@@ -90,6 +97,12 @@ class SDGOcc(BaseOccDetector):
             synthetic world's two key frames it filled 5 and 11 of 1,056
             cells instead of 292 and 271).
         downsample (int): Image-to-feature stride. Defaults to 16.
+        num_frames (int): T, frames of camera input (the current one and
+            T - 1 previous key frames, see :mod:`.temporal_fusion`). 1 (the
+            default) is the single-frame model, unchanged.
+        test_cache (bool): With T > 1, reuse at test time each frame's
+            camera BEV for the next frame (a sequential loader then runs
+            about one frame's image backbone per sample). Defaults to True.
         **kwargs: ``empty_index``, ``ignore_index``, ``loss_mask_key``,
             ``data_preprocessor`` and ``init_cfg`` of
             :class:`BaseOccDetector`.
@@ -115,6 +128,8 @@ class SDGOcc(BaseOccDetector):
                  teacher_loss_weight: float = 1.0,
                  seg_empty_label: Optional[int] = None,
                  downsample: int = 16,
+                 num_frames: int = 1,
+                 test_cache: bool = True,
                  **kwargs):
         super().__init__(
             point_cloud_range,
@@ -151,6 +166,17 @@ class SDGOcc(BaseOccDetector):
         self.camera_bev_conv = nn.Sequential(
             nn.Conv2d(cam_channels, cam_channels, 3, padding=1, bias=False),
             nn.BatchNorm2d(cam_channels))
+        if int(num_frames) < 1:
+            raise ValueError(f'SDGOcc num_frames must be >= 1, got '
+                             f'{num_frames}')
+        self.num_frames = int(num_frames)
+        self.test_cache = bool(test_cache)
+        # T = 1 adds no module, so its state dict is today's.
+        self.temporal_fusion = None
+        if self.num_frames > 1:
+            self.temporal_fusion = TemporalBEVFusion(cam_channels,
+                                                     self.num_frames)
+        self.bev_cache = FrameBEVCache(capacity=4 * self.num_frames)
         self.bev_encoder = MODELS.build(bev_encoder)
         self.occ_head = self.build_child(
             occ_head, dz=self.occ_shape[2], **self.head_defaults())
@@ -273,9 +299,9 @@ class SDGOcc(BaseOccDetector):
                                   lidar2img, imgs.shape[-2:], time_dims)
         return depth_out, cam
 
-    def extract_camera_bev(self, inputs: dict, data_samples: Sequence
-                           ) -> Tuple[Dict[str, Tensor], Dict[str, Tensor]]:
-        """DepthNet outputs and the camera BEV F_bev^C.
+    def frame_camera_bev(self, inputs: dict, data_samples: Sequence
+                         ) -> Tuple[Dict[str, Tensor], Dict[str, Tensor]]:
+        """DepthNet outputs and the camera BEV F_bev^C of one frame.
 
         :meth:`lift_camera_bev`, then ``camera_bev_conv``.
 
@@ -289,6 +315,86 @@ class SDGOcc(BaseOccDetector):
         cam['bev_pooled'] = cam['bev']
         cam['bev'] = self.camera_bev_conv(cam['bev'])
         return depth_out, cam
+
+    def extract_camera_bev(self, inputs: dict, data_samples: Sequence
+                           ) -> Tuple[Dict[str, Tensor], Dict[str, Tensor]]:
+        """DepthNet outputs and the camera BEV the rest of the model sees.
+
+        With T = 1, :meth:`frame_camera_bev`. With T > 1, ``imgs`` is
+        Shape (B, T * N, 3, H, W) (current frame first); the current
+        frame's BEV, and those of the T - 1 previous frames (from the test
+        cache where it has them) warped into the current frame, are fused by
+        ``temporal_fusion``. ``bev_current`` keeps the current frame's own
+        BEV; ``bev_mask`` stays the current frame's pooled coverage (FOAD's
+        M_img: a cell only earlier frames saw is still one the current
+        cameras miss, so FOAD keeps distilling there).
+
+        Returns:
+            tuple[dict, dict]: As :meth:`frame_camera_bev`; the DepthNet
+            outputs are the current frame's.
+        """
+        if self.num_frames == 1:
+            return self.frame_camera_bev(inputs, data_samples)
+        imgs = inputs['imgs']
+        if imgs.dim() != 5 or imgs.shape[1] % self.num_frames:
+            raise ValueError(f'SDGOcc(num_frames={self.num_frames}) expects '
+                             'inputs["imgs"] of shape (B, T * N, 3, H, W), '
+                             f'got {tuple(imgs.shape)}')
+        views = self.lidar2img(data_samples, imgs.device).shape[1]
+        if imgs.shape[1] != self.num_frames * views:
+            raise ValueError(
+                f'SDGOcc(num_frames={self.num_frames}): inputs["imgs"] holds '
+                f'{imgs.shape[1]} views, expected T * N = {self.num_frames} '
+                f'* {views} (the current frame\'s views, then each previous '
+                "frame's, as LoadPreviousKeyFrames stacks them)")
+        frames = imgs.unflatten(1, (self.num_frames, -1))
+        depth_out, cam = self.frame_camera_bev(
+            dict(inputs, imgs=frames[:, 0]), data_samples)
+        use_cache = self.test_cache and not self.training
+        if use_cache:
+            self.bev_cache.put(
+                [s.metainfo.get('token') for s in data_samples], cam['bev'])
+        previous = []
+        for k in range(1, self.num_frames):
+            bev = None
+            if use_cache:
+                # A sample without the link misses; frame_samples then
+                # says what the pipeline lacks.
+                bev = self.bev_cache.get([
+                    (s.metainfo.get('prev_tokens') or [None] * k)[k - 1]
+                    for s in data_samples
+                ])
+            if bev is None:
+                bev = self._previous_camera_bev(frames[:, k], data_samples,
+                                                k)
+            previous.append(bev)
+        cam['bev_current'] = cam['bev']
+        cam['bev'] = self.temporal_fusion(
+            cam['bev'], previous,
+            self.stack_meta(data_samples, 'prev2curr', imgs.device),
+            self.point_cloud_range)
+        return depth_out, cam
+
+    def _previous_camera_bev(self, imgs: Tensor, data_samples: Sequence,
+                             k: int) -> Tensor:
+        """Camera BEV (B, C, Y, X) of frame t-k in its own frame.
+
+        Without gradient, as BEVDet4D computes its adjacent frames: the
+        current frame trains the shared camera branch, the previous ones
+        only feed the fusion conv, and the test cache (which stores
+        detached BEVs) then sees exactly what training saw.
+        """
+        samples = frame_samples(data_samples, k)
+        inputs = dict(imgs=imgs)
+        if self.view_transform.use_sdg:
+            inputs['points'] = frame_points(data_samples, k, imgs.device)
+        with torch.no_grad():
+            return self.frame_camera_bev(inputs, samples)[1]['bev']
+
+    def train(self, mode: bool = True) -> 'SDGOcc':
+        """Switch mode; the test cache is emptied, as weights may change."""
+        self.bev_cache.clear()
+        return super().train(mode)
 
     @staticmethod
     def _points(inputs: dict, why: str) -> List[Tensor]:

@@ -21,6 +21,14 @@ ABLATIONS = sorted(glob.glob(osp.join(CONFIG_DIR, 'ablations', '*.py')))
 TINY = [path for path in MAIN if '_tiny_' in path]
 
 
+def _tiny(variant):
+    return osp.join(CONFIG_DIR,
+                    f'sdgocc-{variant}_tiny_1xb1-6e_occ3d-nus-synthetic.py')
+
+
+TINY_FUSION = _tiny('fusion')
+
+
 def _main(variant, dataset):
     return osp.join(CONFIG_DIR, f'sdgocc-{variant}_r50_4xb2-24e_{dataset}.py')
 
@@ -52,7 +60,10 @@ DELTAS = {
     }),
     KL: (FUSION, KL_KEYS),
     _main('kl', 'surroundocc-nus'): (FUSION_SOCC, KL_KEYS),
-    TINY[1]: (TINY[0], KL_KEYS),
+    _tiny('kl'): (TINY_FUSION, KL_KEYS),
+    # The temporal variants (T = 2): the frame count, nothing else.
+    _main('fusion-2f', 'occ3d-nus'): (FUSION, {'num_frames'}),
+    _tiny('fusion-2f'): (TINY_FUSION, {'num_frames'}),
     # Table 3: Baseline, +SDG, +FOAD (SDG + FOAD is FUSION itself).
     'sdgocc-camera-lss': (FUSION, CAMERA_KEYS | NO_SDG_KEYS),
     'sdgocc-camera-sdg': (FUSION, CAMERA_KEYS),
@@ -82,7 +93,7 @@ def test_config_inventory():
 
 
 @pytest.mark.parametrize(
-    'path', [p for p in MAIN if p not in TINY[:1]] + ABLATIONS,
+    'path', [p for p in MAIN if p != TINY_FUSION] + ABLATIONS,
     ids=lambda p: osp.basename(p)[:-3])
 def test_each_delta_changes_only_its_documented_keys(path):
     """Compared with the config it builds on, a config changes exactly the

@@ -178,9 +178,21 @@ def test_extend_mmdet3d_info_file(world_copy, tmp_path):
         'nuscenes_infos_train.pkl'
     for got, want in zip(extended['data_list'], ours):
         for key, value in want.items():
-            if key in ('lidar_sweeps', 'images'):
+            if key in ('lidar_sweeps', 'images', 'prev_key_frame'):
                 continue
             assert got[key] == value, key
+        # Both converters link the same previous key frame (its images by
+        # path: their calibration is compared as the sample's own).
+        assert (got['prev_key_frame'] is None) == (
+            want['prev_key_frame'] is None)
+        if want['prev_key_frame'] is not None:
+            for key in ('token', 'ego2global', 'lidar_points'):
+                assert got['prev_key_frame'][key] == \
+                    want['prev_key_frame'][key], key
+            assert {c: i['img_path'] for c, i in
+                    got['prev_key_frame']['images'].items()} == {
+                c: i['img_path'] for c, i in
+                want['prev_key_frame']['images'].items()}
         assert [s['lidar_points']['lidar_path'] for s in got['lidar_sweeps']
                 ] == [s['lidar_points']['lidar_path']
                       for s in want['lidar_sweeps']]

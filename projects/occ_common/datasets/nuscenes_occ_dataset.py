@@ -1,7 +1,7 @@
 """nuScenes with SurroundOcc or Occ3D occupancy labels."""
 import copy
 import os.path as osp
-from typing import Callable, List, Optional, Sequence, Union
+from typing import Callable, Dict, List, Optional, Sequence, Union
 
 from mmdet3d.registry import DATASETS
 from mmengine.dataset import BaseDataset
@@ -52,6 +52,10 @@ class NuScenesOccDataset(BaseDataset):
         load_interval (int): Keep every ``load_interval``-th sample.
             Defaults to 1.
         test_mode (bool): Evaluation mode. Defaults to False.
+        num_frames (int): Key frames per sample, the current one and
+            ``num_frames - 1`` before it; each sample then carries
+            ``prev_frames`` (see :meth:`previous_frames`) for
+            ``LoadPreviousKeyFrames``. Defaults to 1.
         metainfo (dict, optional): Overrides of the class metainfo.
         backend_args (dict, optional): mmengine file backend arguments for
             the info file. Defaults to None (local files).
@@ -72,6 +76,7 @@ class NuScenesOccDataset(BaseDataset):
                  filter_empty_gt: bool = True,
                  load_interval: int = 1,
                  test_mode: bool = False,
+                 num_frames: int = 1,
                  metainfo: Optional[dict] = None,
                  backend_args: Optional[dict] = None,
                  **kwargs) -> None:
@@ -88,6 +93,9 @@ class NuScenesOccDataset(BaseDataset):
         if load_interval < 1:
             raise ValueError(f'load_interval must be >= 1, got '
                              f'{load_interval}')
+        if num_frames < 1:
+            raise ValueError(f'num_frames must be >= 1, got {num_frames}')
+        self.num_frames = int(num_frames)
         self.occ_format = occ_format
         self.coord_frame = coord_frame
         self.cam_names = tuple(cam_names)
@@ -154,7 +162,76 @@ class NuScenesOccDataset(BaseDataset):
             self._metainfo.setdefault(key, value)
         self._metainfo['info_classes'] = infos['metainfo'].get('classes')
         raw = infos['data_list'][::self.load_interval]
-        return [self.parse_data_info(copy.deepcopy(info)) for info in raw]
+        parsed = [self.parse_data_info(copy.deepcopy(info)) for info in raw]
+        if self.num_frames > 1:
+            # The whole file, not every n-th sample: links skip nothing.
+            by_token = {e['token']: e for e in infos['data_list']}
+            for info in parsed:
+                info['prev_frames'] = self.previous_frames(info, by_token)
+        return parsed
+
+    def previous_frames(self, info: dict,
+                        by_token: Dict[str, dict]) -> List[dict]:
+        """The ``num_frames - 1`` key frames before ``info``, nearest first.
+
+        Frame t-1 is the sample's ``prev_key_frame`` link; frame t-k the
+        link of frame t-(k-1)'s entry in the same file. Where a scene
+        starts (the link is None) the earliest frame repeats, the current
+        one for a scene's first sample: it then looks like a car that has
+        not moved, which is what BEVDet4D feeds at a scene's start.
+
+        Args:
+            info (dict): A parsed sample.
+            by_token (dict[str, dict]): Raw entries of the info file.
+
+        Returns:
+            list[dict]: Per frame ``token``, ``ego2global`` and
+            ``lidar2ego`` (4, 4), ``lidar_path``, ``num_pts_feats`` and
+            ``images`` (parsed as the sample's own).
+
+        Raises:
+            ValueError: If the info file has no ``prev_key_frame`` links
+                (written before they existed) or a link's entry is missing.
+        """
+        where = f'{self.ann_file}: sample {info["token"]}'
+        if 'prev_key_frame' not in info:
+            raise ValueError(
+                f'{where} has no prev_key_frame link, needed by num_frames='
+                f'{self.num_frames}; re-create the info file with '
+                'tools/create_data.py --overwrite')
+        frames, link = [], info['prev_key_frame']
+        current = dict(token=info['token'], ego2global=info['ego2global'],
+                       lidar2ego=info['lidar2ego'],
+                       lidar_path=info['lidar_path'],
+                       num_pts_feats=info['num_pts_feats'],
+                       images=info['images'])
+        for k in range(1, self.num_frames):
+            if link is None:
+                frames.append(frames[-1] if frames else current)
+                continue
+            frames.append(self._parse_link(link, f'{where} frame t-{k}'))
+            if k + 1 < self.num_frames:
+                if link['token'] not in by_token:
+                    raise ValueError(
+                        f'{where}: key frame t-{k} ({link["token"]}) is not '
+                        f'in the file, so frame t-{k + 1} cannot be found')
+                link = by_token[link['token']].get('prev_key_frame')
+        return frames
+
+    def _parse_link(self, link: dict, where: str) -> dict:
+        """A ``prev_key_frame`` link with absolute paths and matrices."""
+        lidar = self._entry(link, 'lidar_points',
+                            ('lidar_path', 'num_pts_feats', 'lidar2ego'),
+                            where)
+        return dict(
+            token=link['token'],
+            ego2global=as_matrix(link['ego2global'], _MAT44,
+                                 f'{where} ego2global'),
+            lidar2ego=as_matrix(lidar['lidar2ego'], _MAT44,
+                                f'{where} lidar_points.lidar2ego'),
+            lidar_path=self._join('pts', lidar['lidar_path']),
+            num_pts_feats=lidar['num_pts_feats'],
+            images=self._parse_images(link, where))
 
     def _join(self, key: str, path: Optional[str]) -> Optional[str]:
         return None if path is None else osp.join(self.data_prefix[key], path)
@@ -196,6 +273,20 @@ class NuScenesOccDataset(BaseDataset):
             pts[key] = as_matrix(pts[key], _MAT44,
                                  f'{name}.lidar_points.{key}')
             pts['lidar_path'] = self._join('sweeps', pts['lidar_path'])
+        info['images'] = self._parse_images(info, where)
+        info['pts_semantic_mask_path'] = self._join(
+            'pts_semantic_mask', info['pts_semantic_mask_path'])
+        for key in ('occ_surroundocc_path', 'occ_occ3d_path'):
+            info[key] = self._join('occ', info[key])
+        info['occ_path'] = info[f'occ_{self.occ_format}_path']
+        info['occ_format'] = self.occ_format
+        info['coord_frame'] = self.coord_frame
+        info['ann_file'] = self.ann_file
+        return info
+
+    def _parse_images(self, info: dict, where: str) -> Dict[str, dict]:
+        """The ``cam_names`` views of an entry (or link) with absolute
+        paths and numpy matrices."""
         missing = [c for c in self.cam_names if c not in info['images']]
         if missing:
             raise ValueError(f'{self.ann_file}: sample {info["token"]} has '
@@ -213,16 +304,7 @@ class NuScenesOccDataset(BaseDataset):
                 image[key] = as_matrix(image[key], _MAT44,
                                        f'{where} images.{cam}.{key}')
             images[cam] = image
-        info['images'] = images
-        info['pts_semantic_mask_path'] = self._join(
-            'pts_semantic_mask', info['pts_semantic_mask_path'])
-        for key in ('occ_surroundocc_path', 'occ_occ3d_path'):
-            info[key] = self._join('occ', info[key])
-        info['occ_path'] = info[f'occ_{self.occ_format}_path']
-        info['occ_format'] = self.occ_format
-        info['coord_frame'] = self.coord_frame
-        info['ann_file'] = self.ann_file
-        return info
+        return images
 
     @staticmethod
     def _entry(container, key, required, where: str) -> dict:

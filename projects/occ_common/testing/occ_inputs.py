@@ -8,6 +8,7 @@ y down, z forward); the matrices follow the conventions of
 import math
 from typing import List, Sequence, Tuple
 
+import numpy as np
 import torch
 from torch import Tensor
 
@@ -170,3 +171,49 @@ def make_occ_batch(batch_size: int = 1,
         sample.gt_depth = sparse_depth_maps(pts, lidar2img, img_shape)
         samples.append(sample)
     return dict(imgs=imgs, points=points), samples
+
+
+def make_temporal_scene(num_key_frames: int = 3,
+                        step: float = 2.0,
+                        **batch_kwargs) -> List[Tuple[dict, List]]:
+    """A scene of key frames in the two-frame layout of
+    ``LoadPreviousKeyFrames`` (T = 2), for the temporal models.
+
+    Key frame ``k`` is :func:`make_occ_batch` with ``seed=k``, its sample
+    ``b`` has the token ``f'frame{k}-{b}'``; the ego drives ``step``
+    metres along +x per key frame, so ``prev2curr`` is a translation by
+    ``-step`` (the identity for the first frame, which repeats itself as
+    its previous frame).
+
+    Args:
+        num_key_frames (int): Key frames. Defaults to 3.
+        step (float): Ego motion per key frame, metres. Defaults to 2.
+        **batch_kwargs: For :func:`make_occ_batch` (not ``seed``).
+
+    Returns:
+        list[tuple[dict, list[Det3DDataSample]]]: Per key frame, inputs
+        with ``imgs`` Shape (B, 2 * N, 3, H, W) (current views first) and
+        the samples with the ``prev_*`` metainfo.
+    """
+    frames = [make_occ_batch(seed=k, **batch_kwargs)
+              for k in range(num_key_frames)]
+    scene = []
+    for k, (inputs, samples) in enumerate(frames):
+        p_inputs, p_samples = frames[max(k - 1, 0)]
+        prev2curr = np.eye(4, dtype=np.float32)
+        prev2curr[0, 3] = -step if k else 0.0
+        inputs = dict(inputs, imgs=torch.cat([inputs['imgs'],
+                                              p_inputs['imgs']], 1))
+        for b, (sample, prev) in enumerate(zip(samples, p_samples)):
+            meta = prev.metainfo
+            sample.set_metainfo(dict(
+                token=f'frame{k}-{b}',
+                prev_tokens=[f'frame{max(k - 1, 0)}-{b}'],
+                prev2curr=prev2curr[None],
+                prev_cam2img=meta['cam2img'][None],
+                prev_lidar2cam=meta['lidar2cam'][None],
+                prev_img_aug_matrix=meta['img_aug_matrix'][None],
+                prev_lidar2img=meta['lidar2img'][None],
+                prev_points=[p_inputs['points'][b].numpy()]))
+        scene.append((inputs, samples))
+    return scene

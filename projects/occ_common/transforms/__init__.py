@@ -8,10 +8,12 @@ from .image_aug import MultiViewImageAug
 from .image_loading import LoadMultiViewImagesOcc
 from .loading import LoadLidarSegLabels, LoadOccupancyGT
 from .points_loading import LoadOccPointsFromFile, LoadOccPointsFromMultiSweeps
+from .previous_frames import LoadPreviousKeyFrames
 
 __all__ = [
     'LoadOccPointsFromFile', 'LoadOccPointsFromMultiSweeps',
     'LoadMultiViewImagesOcc', 'LoadOccupancyGT', 'LoadLidarSegLabels',
     'MultiViewImageAug', 'PointsToDepthMaps', 'PointsToSemanticMaps',
-    'OccBEVAug', 'PointsToEgoFrame', 'PackOccInputs', 'RemoveEgoPoints'
+    'OccBEVAug', 'PointsToEgoFrame', 'PackOccInputs', 'RemoveEgoPoints',
+    'LoadPreviousKeyFrames'
 ]

@@ -22,7 +22,8 @@ OCC_FIELDS = dict(
 #: returns, the source of the 2-D semantic targets), and which points column
 #: is the sweeps' time lag (``points_time_dim``: models that need the key
 #: frame alone, such as SDG-OCC's depth guidance, select it as
-#: ``PointsToDepthMaps`` does).
+#: ``PointsToDepthMaps`` does), and the previous key frames of a temporal
+#: sample (``LoadPreviousKeyFrames``).
 OCC_META_KEYS = ('sample_idx', 'token', 'scene_token', 'scene_name',
                  'is_rainy', 'is_night', 'timestamp', 'lidar_path',
                  'img_path', 'cam_names', 'num_views', 'ori_shape',
@@ -31,7 +32,10 @@ OCC_META_KEYS = ('sample_idx', 'token', 'scene_token', 'scene_name',
                  'lidar2ego', 'ori_lidar2ego', 'ego2global', 'occ_format',
                  'coord_frame', 'occ_pc_range', 'occ_voxel_size',
                  'num_pts_feats', 'img_aug_params', 'bda_params',
-                 'num_ego_points', 'seg_2d_source', 'points_time_dim')
+                 'num_ego_points', 'seg_2d_source', 'points_time_dim',
+                 'prev_tokens', 'prev2curr', 'prev_cam2img',
+                 'prev_lidar2cam', 'prev_img_aug_matrix', 'prev_lidar2img',
+                 'prev_points')
 
 
 @TRANSFORMS.register_module()

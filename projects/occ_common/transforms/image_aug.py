@@ -55,6 +55,52 @@ def affine_to_4x4(mat: np.ndarray) -> np.ndarray:
     return out
 
 
+def augment_view(img: np.ndarray, params: dict,
+                 final_size: Tuple[int, int]) -> tuple:
+    """Apply one view's augmentation parameters.
+
+    Shared by :class:`MultiViewImageAug` and the previous key frames of a
+    temporal sample, which take the current frame's parameters.
+
+    Args:
+        img (np.ndarray): Shape (H0, W0, C).
+        params (dict): ``resized``, ``crop``, ``flip``, ``rotate``, from
+            :meth:`MultiViewImageAug.sample_params`.
+        final_size (tuple[int, int]): Output (H, W).
+
+    Returns:
+        tuple[np.ndarray, np.ndarray]: The image (H, W, C) and its 3x3
+        pixel map.
+    """
+    height, width = final_size
+    src_h, src_w = img.shape[:2]
+    res_h, res_w = params['resized']
+    # The rounded size fixes the exact (possibly anisotropic) scale.
+    scale_x, scale_y = res_w / src_w, res_h / src_h
+    if (res_h, res_w) != (src_h, src_w):
+        shrink = res_w < src_w
+        img = cv2.resize(
+            img, (res_w, res_h),
+            interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
+    full = _affine(scale_x, scale_y, params['crop'], params['flip'],
+                   params['rotate'], final_size)
+    rest = _affine(1.0, 1.0, params['crop'], params['flip'],
+                   params['rotate'], final_size)
+    # OpenCV puts pixel centres at integers: shift by half a pixel.
+    half = np.array([[1, 0, 0.5], [0, 1, 0.5], [0, 0, 1]])
+    warp = np.linalg.inv(half) @ rest @ half
+    out = cv2.warpAffine(
+        img,
+        warp[:2],
+        (width, height),
+        flags=cv2.INTER_LINEAR,
+        borderMode=cv2.BORDER_CONSTANT,
+        borderValue=0)
+    if out.ndim == 2 and img.ndim == 3:
+        out = out[..., None]
+    return out, full
+
+
 @TRANSFORMS.register_module()
 class MultiViewImageAug(BaseTransform):
     """Resize, crop, flip and rotate every view; track the pixel map.
@@ -158,7 +204,7 @@ class MultiViewImageAug(BaseTransform):
             rotate=self._draw(self.rot_range))
 
     def augment(self, img: np.ndarray, params: dict) -> tuple:
-        """Apply one view's augmentation.
+        """Apply one view's augmentation (:func:`augment_view`).
 
         Args:
             img (np.ndarray): Shape (H0, W0, C).
@@ -168,33 +214,7 @@ class MultiViewImageAug(BaseTransform):
             tuple[np.ndarray, np.ndarray]: The image (H, W, C) and its 3x3
             pixel map.
         """
-        height, width = self.final_size
-        src_h, src_w = img.shape[:2]
-        res_h, res_w = params['resized']
-        # The rounded size fixes the exact (possibly anisotropic) scale.
-        scale_x, scale_y = res_w / src_w, res_h / src_h
-        if (res_h, res_w) != (src_h, src_w):
-            shrink = res_w < src_w
-            img = cv2.resize(
-                img, (res_w, res_h),
-                interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
-        full = _affine(scale_x, scale_y, params['crop'], params['flip'],
-                       params['rotate'], self.final_size)
-        rest = _affine(1.0, 1.0, params['crop'], params['flip'],
-                       params['rotate'], self.final_size)
-        # OpenCV puts pixel centres at integers: shift by half a pixel.
-        half = np.array([[1, 0, 0.5], [0, 1, 0.5], [0, 0, 1]])
-        warp = np.linalg.inv(half) @ rest @ half
-        out = cv2.warpAffine(
-            img,
-            warp[:2],
-            (width, height),
-            flags=cv2.INTER_LINEAR,
-            borderMode=cv2.BORDER_CONSTANT,
-            borderValue=0)
-        if out.ndim == 2 and img.ndim == 3:
-            out = out[..., None]
-        return out, full
+        return augment_view(img, params, self.final_size)
 
     def transform(self, results: dict) -> dict:
         """Augment every view of one sample.

@@ -179,3 +179,40 @@ def test_tiny_configs_predict_on_the_real_sample(real_info, path):
     first = logits[0] if isinstance(logits, (list, tuple)) else logits
     first = first[0] if isinstance(first, (list, tuple)) else first
     assert torch.isfinite(first).all()
+
+
+def test_single_key_frame_repeats_itself_as_its_previous_frame(real_info):
+    """The sample has no previous key frame (its info has no link): with
+    num_frames=2 its previous frame is itself, so the packed sample holds
+    the six 256x704 views twice, identical, prev2curr is the identity and
+    the previous matrices are the current ones. With the config's ego box
+    the previous frame's points are the current ones (26,162 of the file's
+    34,688); without it all 34,688."""
+    assert load_info_file(real_info)['data_list'][0]['prev_key_frame'] \
+        is None
+    cfg = Config.fromfile(
+        osp.join(REPO, 'configs', '_base_', 'datasets',
+                 'surroundocc-nus.py'))
+    ds_cfg = cfg.val_dataloader.dataset
+    ds_cfg.update(data_root=REAL, ann_file=real_info, num_frames=2)
+    previous = dict(type='LoadPreviousKeyFrames', num_frames=2,
+                    load_points=True)
+    ds_cfg.pipeline = list(cfg.test_inputs) + [
+        dict(previous, ego_box=cfg.ego_box), dict(type='PackOccInputs')
+    ]
+    out = DATASETS.build(ds_cfg)[0]
+    img = out['inputs']['img']
+    meta = out['data_samples'].metainfo
+    assert img.shape == (12, 3, 256, 704)
+    assert torch.equal(img[:6], img[6:])
+    assert meta['prev_tokens'] == ['ca9a282c9e77460f8360f564131a8af5']
+    np.testing.assert_allclose(meta['prev2curr'][0], np.eye(4), atol=1e-6)
+    np.testing.assert_allclose(meta['prev_lidar2img'][0], meta['lidar2img'],
+                               rtol=1e-6)
+    points = out['inputs']['points'].numpy()
+    assert len(points) == NUM_POINTS - NUM_EGO
+    np.testing.assert_array_equal(meta['prev_points'][0][:, :4],
+                                  points[:, :4])
+    ds_cfg.pipeline[-2] = previous
+    meta = DATASETS.build(ds_cfg)[0]['data_samples'].metainfo
+    assert len(meta['prev_points'][0]) == NUM_POINTS

@@ -27,6 +27,7 @@ import numpy as np
 
 from ...utils.safe_pickle import load_info_file
 from ..info_format import CAMERA_NAMES, weather_flags
+from .key_frame_links import link_previous_key_frames
 from .label_files import label_roots, occ_label_paths
 from .nuscenes_occ_converter import write_info_file
 from .report import ConversionReport
@@ -245,6 +246,7 @@ def extend_mmdet3d_info_file(info_file: str,
         extend_entry(entry, files, scenes, roots, occ3d_scenes, report)
         for entry in infos['data_list']
     ]
+    link_previous_key_frames(entries)
     os.makedirs(out_dir, exist_ok=True)
     write_info_file(target, entries, version, split, synthetic=False,
                     extended_from=osp.basename(info_file),

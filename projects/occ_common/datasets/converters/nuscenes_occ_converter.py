@@ -43,6 +43,7 @@ from ..info_format import (CAMERA_NAMES, INFO_VERSION, NUM_POINT_FEATS,
                            weather_flags)
 from ..nuscenes_classes import OCC_CLASS_NAMES
 from .devkit_view import devkit_view
+from .key_frame_links import link_previous_key_frames
 from .label_files import (exists_or_report, label_roots, occ_label_paths,
                           rel_path)
 from .report import ConversionReport
@@ -441,7 +442,8 @@ def create_nuscenes_occ_infos(root_path: str,
                 token = nusc.get('sample', token)['next']
         print(f'{version} {split}: {len(tasks)} samples of {len(names)} '
               'scenes')
-        data[split] = convert_samples(ctx, tasks, workers)
+        data[split] = link_previous_key_frames(
+            convert_samples(ctx, tasks, workers))
     if 'val' in data:
         data['val_rainy'] = [e for e in data['val'] if e['is_rainy']]
         data['val_night'] = [e for e in data['val'] if e['is_night']]

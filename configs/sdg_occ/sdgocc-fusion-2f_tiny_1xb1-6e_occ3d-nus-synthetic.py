@@ -1,0 +1,25 @@
+# The tiny SDG-Fusion over T = 2 key frames (the temporal delta of
+# sdgocc-fusion-2f_r50_4xb2-24e_occ3d-nus.py on the tiny model): CPU smoke
+# test of the previous-frame loading, the BEV warp and fusion, the cache.
+_base_ = ['./sdgocc-fusion_tiny_1xb1-6e_occ3d-nus-synthetic.py']
+
+num_frames = 2
+model = dict(num_frames=num_frames)
+
+_previous = dict(
+    type='LoadPreviousKeyFrames',
+    num_frames=num_frames,
+    load_points=True,
+    ego_box=_base_.ego_box,
+    point_cloud_range=_base_.point_cloud_range)
+train_pipeline = _base_.train_pipeline[:-1] + [
+    _previous, _base_.train_pipeline[-1]
+]
+test_pipeline = _base_.test_pipeline[:-1] + [
+    _previous, _base_.test_pipeline[-1]
+]
+train_dataloader = dict(
+    dataset=dict(num_frames=num_frames, pipeline=train_pipeline))
+val_dataloader = dict(
+    dataset=dict(num_frames=num_frames, pipeline=test_pipeline))
+test_dataloader = val_dataloader
