@@ -184,6 +184,25 @@ def lidar_like_cloud(num_points: int, pc_range, dims: int,
     return np.concatenate([xyz, extra], axis=1).astype(np.float32)
 
 
+def with_sweep_time(points: np.ndarray, sweeps: int) -> np.ndarray:
+    """Split a cloud into ``sweeps`` equal sweeps by its time column.
+
+    Column 4 becomes the time lag of nuScenes' 20 Hz sweeps: 0 for the
+    first ``ceil(P / sweeps)`` points (the key frame), 0.05 s for the
+    next as many, and so on.
+
+    Args:
+        points (np.ndarray): Shape (P, >= 5).
+        sweeps (int): Key frame plus merged sweeps.
+
+    Returns:
+        np.ndarray: The same array, column 4 rewritten.
+    """
+    per_sweep = max(1, math.ceil(len(points) / sweeps))
+    points[:, 4] = 0.05 * (np.arange(len(points)) // per_sweep)
+    return points
+
+
 def ring_rig(num_cams: int, img_size: Tuple[int, int]) -> Dict[str, list]:
     """Cameras round the LiDAR looking outwards, 70 degree field of view.
 
@@ -254,12 +273,19 @@ def synthetic_batch(cfg: Config, batch_size: int,
                     cam_names=list(cfg.cam_names))
         described.append(f'{num_cams}x{height}x{width} images')
     if pc_range is not None:
+        sweeps = cfg.get('sweeps_num', 0) + 1
         inputs['points'] = [
-            torch.from_numpy(lidar_like_cloud(num_points, pc_range, 5, gen))
+            torch.from_numpy(
+                with_sweep_time(
+                    lidar_like_cloud(num_points, pc_range, 5, gen), sweeps))
             for _ in range(batch_size)
         ]
         meta.update(occ_pc_range=np.asarray(pc_range, np.float32))
-        described.append(f'{num_points} points')
+        if sweeps > 1:
+            # As LoadOccPointsFromMultiSweeps marks them: what uses the key
+            # frame only (SDG's depth guidance) must see one sweep, not all.
+            meta.update(points_time_dim=4)
+        described.append(f'{num_points} points in {sweeps} sweeps')
     grid = cfg.get('grid_size')
     samples = []
     for index in range(batch_size):

@@ -9,6 +9,8 @@ from projects.occ_common.testing.tool_logs import load_tool
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ.py')
+SDG_CONFIG = osp.join(ROOT, 'configs', 'sdg_occ',
+                      'sdgocc-fusion_r50_4xb2-24e_occ3d-nus.py')
 
 
 def _tool():
@@ -92,3 +94,18 @@ def test_lidar_like_cloud_lies_in_range():
     assert (points[:, :3] >= np.array(pc_range[:3])).all()
     assert (points[:, :3] < np.array(pc_range[3:])).all()
     assert np.isclose(points[:, 2], -1.84, atol=1e-4).mean() > 0.2
+
+
+def test_synthetic_cloud_has_one_key_frame_sweep():
+    """11 sweeps of 10 points each: 10 points with lag 0 (the key frame),
+    then 0.05 s steps up to 0.5 s; the batch names the time column, so
+    key-frame-only steps (SDG's depth guidance) see one sweep."""
+    tool = _tool()
+    points = tool.with_sweep_time(np.zeros((110, 5), np.float32), 11)
+    assert (points[:, 4] == 0).sum() == 10
+    assert np.allclose(np.unique(points[:, 4]), 0.05 * np.arange(11))
+    cfg = tool.load_config(SDG_CONFIG, None)
+    batch, description = tool.synthetic_batch(cfg, 1, 220)
+    assert batch['data_samples'][0].metainfo['points_time_dim'] == 4
+    assert int((batch['inputs']['points'][0][:, 4] == 0).sum()) == 20
+    assert '220 points in 11 sweeps' in description
