@@ -135,3 +135,51 @@ def test_clamping_cylinder_samples_the_border_ring_beyond_its_radius():
     near = (r < 1.5).nonzero()[0, 0]
     assert sampled[0, 0, near].item() == pytest.approx(
         float(r[near]) - 0.5, abs=1e-5)
+
+
+def _saved_bytes(run):
+    """Bytes autograd keeps for the backward while ``run`` builds its
+    graph (every tensor packed by a saved-tensor hook, counted once per
+    storage)."""
+    storages = {}
+
+    def pack(tensor):
+        storage = tensor.untyped_storage()
+        storages[storage.data_ptr()] = storage.nbytes()
+        return tensor
+
+    with torch.autograd.graph.saved_tensors_hooks(pack, lambda t: t):
+        out = run()
+    return out, sum(storages.values())
+
+
+def test_checkpointed_scales_keep_values_and_gradients():
+    """``with_cp`` gives bitwise the same logits, loss and gradients (to
+    the planes and every parameter) and keeps less for the backward: the
+    plane samples and MLP activations of each scale are recomputed. In
+    eval or under no_grad nothing is checkpointed."""
+    gen = torch.Generator().manual_seed(3)
+    shapes = [((4, 8), (8, 2), (4, 2)), ((2, 4), (4, 1), (2, 1))]
+    planes = [[
+        torch.randn(2, 3, *hw, generator=gen, dtype=torch.float64)
+        for hw in scale
+    ] for scale in shapes]
+    gt = torch.randint(0, 4, (2, 4, 4, 2), generator=gen)
+    results = {}
+    for with_cp in (False, True):
+        head = _head(with_cp=with_cp).double()
+        inputs = [[p.clone().requires_grad_() for p in s] for s in planes]
+        logits, saved = _saved_bytes(lambda: head(inputs))
+        loss = sum(head.loss(logits, gt).values())
+        grads = torch.autograd.grad(
+            loss, [p for s in inputs for p in s] + list(head.parameters()))
+        results[with_cp] = (logits, loss, grads, saved)
+    plain, cp = results[False], results[True]
+    assert all(torch.equal(a, b) for a, b in zip(plain[0], cp[0]))
+    assert torch.equal(plain[1], cp[1])
+    assert all(torch.equal(a, b) for a, b in zip(plain[2], cp[2]))
+    assert cp[3] < plain[3] / 2
+    with torch.no_grad():
+        assert all(
+            torch.equal(a, b)
+            for a, b in zip(_head(with_cp=True).double()(planes), plain[0]))
