@@ -7,9 +7,9 @@ from mmdet3d.registry import MODELS
 from mmdet3d.utils import OptConfigType, OptMultiConfig
 from mmengine.model import BaseModule
 from torch import Tensor, nn
-from torch.utils.checkpoint import checkpoint
 
 from projects.occ_common.models.layers import cartesian_to_cylindrical
+from projects.occ_common.models.layers.checkpointing import checkpoint_if_grad
 from .cylindrical import CylinderGrid
 
 # (height axis, width axis) of each plane as cylinder axes 0 = r,
@@ -188,13 +188,9 @@ class CylindricalOccHead(BaseModule):
                 f'{len(self.scale_shapes)} output scales')
         logits = []
         for level, planes in enumerate(mlvl_planes):
-            if self.with_cp and torch.is_grad_enabled() and any(
-                    p.requires_grad for p in planes):
-                out = checkpoint(
-                    self._scale_logits, level, *planes, use_reentrant=False)
-            else:
-                out = self._scale_logits(level, *planes)
-            logits.append(out)
+            logits.append(
+                checkpoint_if_grad(self.with_cp, self._scale_logits, level,
+                                   *planes))
         return logits
 
     def _scale_logits(self, level: int, *planes: Tensor) -> Tensor:

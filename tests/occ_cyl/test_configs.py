@@ -183,6 +183,7 @@ def _train_step(module, inputs, seed):
     inputs = inputs.clone().requires_grad_()
     module.train()
     outs = module(inputs)
+    outs = [outs] if isinstance(outs, torch.Tensor) else outs
     loss = sum((o * torch.linspace(-1, 1, o.numel()).view(o.shape)).sum()
                for o in outs)
     # backward(), not autograd.grad: mmdet's reentrant checkpoints take
@@ -195,19 +196,20 @@ def _train_step(module, inputs, seed):
     return list(outs), grads, [b.clone() for b in module.buffers()]
 
 
-@pytest.mark.parametrize('part', ['img_encoder.backbone',
-                                  'tpv_encoder.backbone'])
+@pytest.mark.parametrize(
+    'part', ['img_encoder.backbone', 'img_encoder', 'tpv_encoder.backbone'])
 def test_paper_backbone_checkpointing_is_exact(part):
-    """Issue 18: the paper config recomputes the ResNet's bottlenecks and
-    the Swin's blocks in the backward (``with_cp``) to fit one training
-    iteration in memory. That is exact: the ResNet's BatchNorms run with
-    frozen statistics (``norm_eval``), so the recomputation updates no
-    running statistic twice, and the Swin's drop-path masks are redrawn
-    from the saved random state. In float64 on a 64 x 64 image / a
-    128-channel 32 x 32 plane, outputs and buffers are bitwise those
-    without it, gradients (input and every trainable parameter) equal up
-    to the order of summation (the ResNet's residual sums; measured
-    <= 5e-16 relative, bitwise for the Swin)."""
+    """Issue 18: the paper config recomputes the ResNet's bottlenecks, the
+    image FPN and the Swin's blocks in the backward (``with_cp``) to fit
+    one training iteration in memory. That is exact: the ResNet's
+    BatchNorms run with frozen statistics (``norm_eval``), so the
+    recomputation updates no running statistic twice, the FPN has none,
+    and the Swin's drop-path masks are redrawn from the saved random
+    state. In float64 on 64 x 64 images / a 128-channel 32 x 32 plane,
+    outputs and buffers are bitwise those without it, gradients (input and
+    every trainable parameter) equal up to the order of summation (the
+    ResNet's residual sums; measured <= 5e-16 relative, bitwise for the
+    Swin)."""
     cfg = Config.fromfile(PAPER)
     init_default_scope(cfg.default_scope)
     backbone_cfg = cfg.model
@@ -216,7 +218,9 @@ def test_paper_backbone_checkpointing_is_exact(part):
     assert backbone_cfg.with_cp
     channels = backbone_cfg.get('in_channels', 3)
     size = 64 if channels == 3 else 32
-    inputs = torch.randn(1, channels, size, size, dtype=torch.float64)
+    # The encoder takes (B, N, 3, H, W): two views.
+    shape = (1, 2, 3) if part == 'img_encoder' else (1, channels)
+    inputs = torch.randn(*shape, size, size, dtype=torch.float64)
     results = []
     for with_cp in (False, True):
         torch.manual_seed(0)

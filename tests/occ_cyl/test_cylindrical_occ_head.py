@@ -4,6 +4,7 @@ import math
 import pytest
 import torch
 
+from projects.occ_common.testing.autograd_memory import saved_tensor_bytes
 from projects.occ_cyl import CylinderGrid, CylindricalOccHead
 from projects.occ_cyl.cylindrical_occ_head import sample_plane, voxel_centres
 
@@ -137,22 +138,6 @@ def test_clamping_cylinder_samples_the_border_ring_beyond_its_radius():
         float(r[near]) - 0.5, abs=1e-5)
 
 
-def _saved_bytes(run):
-    """Bytes autograd keeps for the backward while ``run`` builds its
-    graph (every tensor packed by a saved-tensor hook, counted once per
-    storage)."""
-    storages = {}
-
-    def pack(tensor):
-        storage = tensor.untyped_storage()
-        storages[storage.data_ptr()] = storage.nbytes()
-        return tensor
-
-    with torch.autograd.graph.saved_tensors_hooks(pack, lambda t: t):
-        out = run()
-    return out, sum(storages.values())
-
-
 def test_checkpointed_scales_keep_values_and_gradients():
     """``with_cp`` gives bitwise the same logits, loss and gradients (to
     the planes and every parameter) and keeps less for the backward: the
@@ -169,7 +154,7 @@ def test_checkpointed_scales_keep_values_and_gradients():
     for with_cp in (False, True):
         head = _head(with_cp=with_cp).double()
         inputs = [[p.clone().requires_grad_() for p in s] for s in planes]
-        logits, saved = _saved_bytes(lambda: head(inputs))
+        logits, saved = saved_tensor_bytes(lambda: head(inputs))
         loss = sum(head.loss(logits, gt).values())
         grads = torch.autograd.grad(
             loss, [p for s in inputs for p in s] + list(head.parameters()))
