@@ -87,3 +87,31 @@ def test_only_sdg_configs_read_lidarseg(path):
         assert 'RemoveEgoPoints' in steps
         if sdg:
             assert steps['LoadLidarSegLabels']['optional']
+
+
+def _backbones_recomputed_with_training_norms(node, where='model'):
+    """Paths of config dicts that recompute activations (``with_cp``)
+    while their BatchNorms train (``norm_eval=False``): the recomputed
+    forward would update the running statistics a second time."""
+    found = []
+    if isinstance(node, dict):
+        if node.get('with_cp') and node.get('norm_eval') is False:
+            found.append(where)
+        for key, value in node.items():
+            found += _backbones_recomputed_with_training_norms(
+                value, f'{where}.{key}')
+    elif isinstance(node, (list, tuple)):
+        for i, value in enumerate(node):
+            found += _backbones_recomputed_with_training_norms(
+                value, f'{where}[{i}]')
+    return found
+
+
+@pytest.mark.parametrize('path', CONFIGS, ids=osp.basename)
+def test_no_recomputation_with_training_batchnorm(path):
+    """A backbone with ``norm_eval=False`` must not set ``with_cp``: the
+    tiny OccCylindrical inherited the paper base's ``with_cp=True`` with
+    its from-scratch ``norm_eval=False`` ResNet-18 and would have counted
+    every BatchNorm update twice."""
+    cfg = Config.fromfile(path)
+    assert _backbones_recomputed_with_training_norms(cfg.model) == []

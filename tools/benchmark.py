@@ -18,7 +18,11 @@ zero) and the share of the machine's fp32 matmul rate that it achieves
 ``torch.mm`` measured in the same process at the same thread count).
 ``--fuse-conv-bn`` (and ``--channels-last``) time the deploy-time model
 whose image backbones' BatchNorms are folded into their convolutions
-(:mod:`projects.occ_common.models.deploy`).
+(:mod:`projects.occ_common.models.deploy`). ``--train`` times one training
+iteration instead (``model.train_step`` with the config's
+``optim_wrapper``: preprocessing, the loss forward, backward and the
+optimiser step), and its peak memory; synthetic batches then carry random
+occupancy labels and sparse LiDAR depth maps.
 
 What is timed is ``model.test_step(batch)``: the data preprocessor
 (normalisation, voxelisation), the forward pass and the prediction
@@ -51,7 +55,7 @@ import json
 import math
 import os
 import os.path as osp
-from typing import Callable, Dict, List, Optional, Tuple
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import torch
@@ -108,6 +112,11 @@ def parse_args(argv=None):
         help='with --fuse-conv-bn: also store the backbones\' weights '
         'channels-last')
     parser.add_argument(
+        '--train',
+        action='store_true',
+        help='time one training iteration (train_step: loss, backward, '
+        'optimiser step) instead of a prediction')
+    parser.add_argument(
         '--matmul-size',
         type=int,
         default=2048,
@@ -124,6 +133,8 @@ def parse_args(argv=None):
         parser.error('--compare takes CONFIG2 and an optional CKPT2.')
     if args.channels_last and not args.fuse_conv_bn:
         parser.error('--channels-last goes with --fuse-conv-bn.')
+    if args.train and args.fuse_conv_bn:
+        parser.error('--fuse-conv-bn is inference only; not with --train.')
     if args.runs < 1 or args.warmup < 0 or args.batch_size < 1:
         parser.error('expected --runs >= 1, --warmup >= 0, --batch-size '
                      '>= 1.')
@@ -184,6 +195,25 @@ def lidar_like_cloud(num_points: int, pc_range, dims: int,
     return np.concatenate([xyz, extra], axis=1).astype(np.float32)
 
 
+def with_sweep_time(points: np.ndarray, sweeps: int) -> np.ndarray:
+    """Split a cloud into ``sweeps`` equal sweeps by its time column.
+
+    Column 4 becomes the time lag of nuScenes' 20 Hz sweeps: 0 for the
+    first ``ceil(P / sweeps)`` points (the key frame), 0.05 s for the
+    next as many, and so on.
+
+    Args:
+        points (np.ndarray): Shape (P, >= 5).
+        sweeps (int): Key frame plus merged sweeps.
+
+    Returns:
+        np.ndarray: The same array, column 4 rewritten.
+    """
+    per_sweep = max(1, math.ceil(len(points) / sweeps))
+    points[:, 4] = 0.05 * (np.arange(len(points)) // per_sweep)
+    return points
+
+
 def ring_rig(num_cams: int, img_size: Tuple[int, int]) -> Dict[str, list]:
     """Cameras round the LiDAR looking outwards, 70 degree field of view.
 
@@ -210,14 +240,25 @@ def ring_rig(num_cams: int, img_size: Tuple[int, int]) -> Dict[str, list]:
         img_aug_matrix=aug.astype(np.float32))
 
 
-def synthetic_batch(cfg: Config, batch_size: int,
-                    num_points: Optional[int]) -> Tuple[dict, str]:
+def synthetic_batch(cfg: Config,
+                    batch_size: int,
+                    num_points: Optional[int],
+                    labels: bool = False) -> Tuple[dict, str]:
     """A collated batch of random data of the config's shapes.
 
     Uses the config's ``cam_names`` and ``img_size`` (images),
     ``point_cloud_range`` and ``sweeps_num`` (points) and ``grid_size`` /
     ``voxel_size`` (GT grid and its metainfo), as the dataset configs in
     ``configs/_base_/datasets`` define them.
+
+    Args:
+        cfg (Config): The config.
+        batch_size (int): Samples.
+        num_points (int, optional): Points per cloud.
+        labels (bool): Training targets: ``gt_occ`` with
+            :func:`synthetic_labels` instead of all empty, and a
+            ``gt_depth`` map per image (:func:`synthetic_depth`). Defaults
+            to False.
 
     Returns:
         tuple[dict, str]: The batch (``inputs`` and ``data_samples``, as
@@ -254,24 +295,66 @@ def synthetic_batch(cfg: Config, batch_size: int,
                     cam_names=list(cfg.cam_names))
         described.append(f'{num_cams}x{height}x{width} images')
     if pc_range is not None:
+        sweeps = cfg.get('sweeps_num', 0) + 1
         inputs['points'] = [
-            torch.from_numpy(lidar_like_cloud(num_points, pc_range, 5, gen))
+            torch.from_numpy(
+                with_sweep_time(
+                    lidar_like_cloud(num_points, pc_range, 5, gen), sweeps))
             for _ in range(batch_size)
         ]
         meta.update(occ_pc_range=np.asarray(pc_range, np.float32))
-        described.append(f'{num_points} points')
+        if sweeps > 1:
+            # As LoadOccPointsFromMultiSweeps marks them: what uses the key
+            # frame only (SDG's depth guidance) must see one sweep, not all.
+            meta.update(points_time_dim=4)
+        described.append(f'{num_points} points in {sweeps} sweeps')
     grid = cfg.get('grid_size')
     samples = []
     for index in range(batch_size):
         sample = Det3DDataSample(metainfo=dict(meta, sample_idx=index))
+        if labels and has_imgs:
+            sample.gt_depth = synthetic_depth(num_cams, cfg.img_size, gen)
         if grid is not None:
-            sample.gt_occ = torch.zeros(tuple(grid), dtype=torch.long)
+            sample.gt_occ = (synthetic_labels(grid, cfg, gen) if labels else
+                             torch.zeros(tuple(grid), dtype=torch.long))
             sample.set_metainfo(
                 dict(occ_voxel_size=np.asarray(cfg.voxel_size, np.float32)))
             described.append('x'.join(str(g) for g in grid) + ' grid')
         samples.append(sample)
     description = f'synthetic: {", ".join(dict.fromkeys(described))}'
     return dict(inputs=inputs, data_samples=samples), description
+
+
+def synthetic_labels(grid: Sequence[int], cfg: Config,
+                     gen: np.random.Generator) -> torch.Tensor:
+    """Occupancy labels like SurroundOcc's: mostly empty, every class.
+
+    90 % of the voxels are the config's ``empty_index`` (0 by default),
+    the rest a uniform random class, so that every class is present (the
+    Lovasz and scene-class-affinity terms do the most work).
+
+    Returns:
+        Tensor: int64. Shape (X, Y, Z).
+    """
+    num_classes = cfg.model.get('num_classes', 2)
+    empty = cfg.model.get('empty_index', 0)
+    occ = gen.integers(0, num_classes, tuple(grid))
+    occ[gen.random(tuple(grid)) < 0.9] = empty
+    return torch.from_numpy(occ)
+
+
+def synthetic_depth(num_cams: int, img_size: Sequence[int],
+                    gen: np.random.Generator) -> torch.Tensor:
+    """Sparse LiDAR depth maps: 2 % of the pixels at 1-60 m, 0 elsewhere
+    (a 10-sweep cloud covers a few per cent of a nuScenes image).
+
+    Returns:
+        Tensor: float32. Shape (N, H, W).
+    """
+    shape = (num_cams, *img_size)
+    depth = gen.uniform(1.0, 60.0, shape).astype(np.float32)
+    depth[gen.random(shape) >= 0.02] = 0.0
+    return torch.from_numpy(depth)
 
 
 def test_batch(cfg: Config, batch_size: int) -> Tuple[dict, str]:
@@ -290,6 +373,14 @@ def predict_once(model: torch.nn.Module, data: dict,
     """One timed call: ``test_step`` without autograd, synchronised."""
     with torch.no_grad():
         model.test_step(data)
+    if device.type == 'cuda':
+        torch.cuda.synchronize(device)
+
+
+def train_once(model: torch.nn.Module, data: dict, optim_wrapper,
+               device: torch.device) -> None:
+    """One timed training iteration: ``train_step``, synchronised."""
+    model.train_step(data, optim_wrapper)
     if device.type == 'cuda':
         torch.cuda.synchronize(device)
 
@@ -316,7 +407,16 @@ class Subject:
             from projects.occ_common.utils import install_checkpoint_loader
             install_checkpoint_loader()
             load_checkpoint(self.model, checkpoint, map_location='cpu')
-        self.model.to(self.device).eval()
+        self.model.to(self.device)
+        self.train = args.train
+        self.optim_wrapper = None
+        if self.train:
+            from mmengine.optim import build_optim_wrapper
+            self.model.train()
+            self.optim_wrapper = build_optim_wrapper(self.model,
+                                                     cfg.optim_wrapper)
+        else:
+            self.model.eval()
         self.folded_bn = 0
         if args.fuse_conv_bn:
             import projects.occ_common.models.deploy as deploy
@@ -324,7 +424,7 @@ class Subject:
                 self.model, channels_last=args.channels_last)
         if args.synthetic_batch:
             self.batch, self.described = synthetic_batch(
-                cfg, args.batch_size, args.num_points)
+                cfg, args.batch_size, args.num_points, labels=args.train)
         else:
             self.batch, self.described = test_batch(cfg, args.batch_size)
         self._data = None
@@ -334,8 +434,13 @@ class Subject:
         self._data = copy.deepcopy(self.batch)
 
     def predict(self) -> None:
-        """One prediction on the input :meth:`fresh_input` made."""
-        predict_once(self.model, self._data, self.device)
+        """One prediction (with ``--train`` one training iteration) on the
+        input :meth:`fresh_input` made."""
+        if self.train:
+            train_once(self.model, self._data, self.optim_wrapper,
+                       self.device)
+        else:
+            predict_once(self.model, self._data, self.device)
 
     def static_report(self) -> Dict:
         """Parameters, GFLOP and peak memory of one prediction."""
@@ -356,6 +461,7 @@ class Subject:
             params=params,
             trainable_params=trainable,
             gflop=gflop,
+            mode='train' if self.train else 'predict',
             folded_bn=self.folded_bn,
             peak_memory_mb=memory.peak_bytes / 2**20,
             forward_memory_mb=memory.added_bytes / 2**20,
@@ -422,6 +528,7 @@ def format_table(report: Dict) -> str:
     models = report['models']
     rows: List[Tuple[str, Callable[[Dict], str]]] = [
         ('model', lambda r: r['model']),
+        ('timed call', lambda r: r['mode']),
         ('params', lambda r: f'{r["params"]:,}'),
         ('latency median (ms)', lambda r: f'{r["latency_ms"]["median"]:.2f}'),
         ('latency std (ms)', lambda r: f'{r["latency_ms"]["std"]:.2f}'),

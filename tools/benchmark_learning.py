@@ -49,6 +49,21 @@ RUNS = {
                         []),
     'sdg-kl-tiny': ('configs/sdg_occ/'
                     'sdgocc-kl_tiny_1xb1-6e_occ3d-nus-synthetic.py', []),
+    # The ablation rows at tiny size: the same deltas as
+    # configs/occ_cyl/ablations/occcyl-nodepthsup_* (Table V) and
+    # configs/sdg_occ/ablations/sdgocc-camera-lss_* (Table 3's baseline).
+    'occcyl-tiny-nodepthsup': ('configs/occ_cyl/occcyl_tiny_1xb1-6e_'
+                               'surroundocc-nus-synthetic.py',
+                               ['model.loss_depth=None']),
+    'sdg-camera-lss-tiny': ('configs/sdg_occ/sdgocc-fusion_tiny_1xb1-6e_'
+                            'occ3d-nus-synthetic.py', [
+                                'model.variant=camera',
+                                'model.lidar_encoder=None',
+                                'model.fusion=None',
+                                'model.view_transform.use_sdg=False',
+                                'model.depth_net.seg_channels=0',
+                                'model.loss_seg=None'
+                            ]),
 }
 #: Files of a run folder.
 RESULT, SETTINGS, CLOCK = 'result.json', 'settings.json', 'train_clock.json'

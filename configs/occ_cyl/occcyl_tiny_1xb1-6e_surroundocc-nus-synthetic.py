@@ -37,10 +37,15 @@ model = dict(
             depth=18,
             base_channels=8,
             frozen_stages=-1,
-            norm_eval=False),
+            norm_eval=False,
+            # Recomputing a backbone whose BatchNorms train would update
+            # their statistics twice per step; a tiny model needs no
+            # memory saving anyway (nor do the modules below).
+            with_cp=False),
         neck=dict(in_channels=[8, 16, 32, 64], out_channels=_img_channels),
         neck_channels=_img_channels,
-        out_channels=_img_channels),
+        out_channels=_img_channels,
+        with_cp=False),
     depth_net=dict(
         in_channels=_img_channels,
         mid_channels=_img_channels,
@@ -63,10 +68,13 @@ model = dict(
             depths=[1, 1, 1, 1],
             num_heads=[1, 1, 2, 2],
             window_size=4,
-            drop_path_rate=0.1),  # mmdet's default
+            drop_path_rate=0.1,  # mmdet's default
+            with_cp=False),
         neck=dict(in_channels=_swin_dims, out_channels=_plane_channels)),
     occ_head=dict(
-        in_channels=_plane_channels, hidden_channels=_plane_channels))
+        in_channels=_plane_channels,
+        hidden_channels=_plane_channels,
+        with_cp=False))
 
 # 96x160 images (a tenth of the paper's side): a 6x10 feature map.
 img_size = (96, 160)

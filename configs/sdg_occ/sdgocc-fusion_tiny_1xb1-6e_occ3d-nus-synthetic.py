@@ -47,7 +47,21 @@ model = dict(
         stage_channels=[_cam_channels * 2, _cam_channels * 4],
         num_blocks=[1, 1],
         out_channels=_bev_channels),
-    occ_head=dict(in_channels=_bev_channels, mid_channels=_bev_channels))
+    occ_head=dict(
+        in_channels=_bev_channels,
+        mid_channels=_bev_channels,
+        # Departure for a short CPU budget: FlashOcc's masked cross-entropy
+        # alone collapses to "ground and free" (measured with
+        # tools/benchmark_learning.py: IoU 62.08, the ground layer exactly,
+        # mIoU 6.4 after 100 and 200 iterations; 2.3 % of the camera-visible
+        # voxels are occupied). Lovasz and the scene-class affinity terms
+        # (OccCylindrical's eq. 18 set) optimise per-class IoU directly.
+        loss_occ=dict(losses=[
+            dict(type='OccFocalLoss', gamma=0.0),
+            dict(type='OccLovaszLoss'),
+            dict(type='SceneClassAffinityLoss', mode='geo'),
+            dict(type='SceneClassAffinityLoss', mode='sem'),
+        ])))
 
 # The base pipelines with the 2-D semantic targets, with two CPU savings:
 # 128x352 images (half the paper's 256x704 per side) and key-frame points
@@ -71,8 +85,8 @@ test_dataloader = val_dataloader
 
 max_epochs = 6
 train_cfg = dict(max_epochs=max_epochs, val_interval=max_epochs)
-# lr 1e-3 (10x the paper's), no warm-up: a from-scratch tiny model on a few
+# lr 2e-3 (20x the paper's), no warm-up: a from-scratch tiny model on a few
 # samples.
-optim_wrapper = dict(optimizer=dict(lr=1e-3))
+optim_wrapper = dict(optimizer=dict(lr=2e-3))
 param_scheduler = []
 default_hooks = dict(checkpoint=dict(interval=max_epochs))

@@ -11,7 +11,9 @@ size that is 6 x 50 x 58 x 100 = 1.74 M points, so materialising the
 :class:`LiftMaxPoolFunction` never builds it: its forward walks over chunks
 of points, keeps the running per-voxel, per-channel maximum and then the
 index of the winning point, and its backward routes the gradient to
-``depth`` and ``context`` through those indices. :func:`naive_lift_max_pool`
+``depth`` and ``context`` through those indices; when no gradient is
+needed, :func:`lift_max` keeps the maxima only (one pass, no winners).
+:func:`naive_lift_max_pool`
 is the reference: outer product, then max pooling.
 
 Tie-break rule (identical in both paths): when several points of a voxel
@@ -63,6 +65,10 @@ def voxel_max_pool(feats: Tensor, voxel_idx: Tensor,
                          f'(P,), got {tuple(feats.shape)} and '
                          f'{tuple(voxel_idx.shape)}')
     _check_voxel_index(voxel_idx, num_voxels)
+    if not (torch.is_grad_enabled() and feats.requires_grad):
+        # Inference: the maxima alone; the int64 (V, C) winners and
+        # (P, C) candidates exist only to route a gradient.
+        return _voxel_max(feats, voxel_idx, num_voxels)
     num_points, channels = feats.shape
     winner = _winners(feats.detach(), voxel_idx,
                       torch.arange(num_points, device=feats.device),
@@ -71,6 +77,19 @@ def voxel_max_pool(feats: Tensor, voxel_idx: Tensor,
     # sends each output's gradient to its winning point only.
     padded = torch.cat([feats, feats.new_zeros(1, channels)], dim=0)
     return padded.gather(0, winner)
+
+
+def _voxel_max(feats: Tensor, voxel_idx: Tensor, num_voxels: int) -> Tensor:
+    """Per-voxel, per-channel maximum, 0 for empty voxels (no winners)."""
+    # Points outside go to a spare row V, dropped at the end: no copy of
+    # the features for a mask.
+    rows = torch.where(voxel_idx >= 0, voxel_idx, num_voxels)
+    with warnings.catch_warnings():
+        warnings.filterwarnings('ignore', message='index_reduce')
+        # include_self=False: a voxel no point reaches keeps its 0.
+        out = feats.new_zeros(num_voxels + 1, feats.shape[1]).index_reduce_(
+            0, rows, feats, 'amax', include_self=False)
+    return out[:num_voxels]
 
 
 def _winners(feats: Tensor, voxel_idx: Tensor, point_ids: Tensor,
@@ -140,6 +159,112 @@ def _chunks(num_images: int, num_bins: int, num_pixels: int,
             yield m, d0 * num_pixels, d1 * num_pixels
 
 
+class _LiftPoints:
+    """The pseudo points of a lift, chunk by chunk (never all at once).
+
+    Args:
+        depth (Tensor): Shape (M, D, h, w).
+        context (Tensor): Shape (M, C, h, w).
+        voxel_idx (Tensor): Shape (M, D, h, w), -1 outside.
+        num_voxels (int): ``V``; points outside go to the spare row ``V``
+            so that chunks stay dense (no masking or gathers per point).
+        chunk_size (int): Points per chunk, rounded to whole depth bins.
+    """
+
+    def __init__(self, depth: Tensor, context: Tensor, voxel_idx: Tensor,
+                 num_voxels: int, chunk_size: int) -> None:
+        self.num_images, self.num_bins, height, width = depth.shape
+        self.channels = context.shape[1]
+        self.num_pixels = height * width
+        self.total = self.num_images * self.num_bins * self.num_pixels
+        self.chunk_size = chunk_size
+        # Pixel-major context rows (a copy the size of the context) keep
+        # every chunk's product contiguous.
+        self.rows = context.permute(0, 2, 3, 1).reshape(
+            self.num_images, self.num_pixels, self.channels).contiguous()
+        points = self.num_bins * self.num_pixels
+        self.depth = depth.reshape(self.num_images, points)
+        idx = voxel_idx.reshape(self.num_images, points)
+        self.idx = torch.where(idx >= 0, idx, num_voxels)
+
+    def __iter__(self) -> Iterator[Tuple[Tensor, Tensor, int]]:
+        """Yield ``(features (n, C), voxel rows (n,), first point id)``."""
+        for m, start, end in _chunks(self.num_images, self.num_bins,
+                                     self.num_pixels, self.chunk_size):
+            bins = (end - start) // self.num_pixels
+            # Same float product as the naive outer product, so the values
+            # (and hence the winners) agree bitwise.
+            feats = self.depth[m, start:end].view(
+                bins, self.num_pixels, 1) * self.rows[m].unsqueeze(0)
+            yield (feats.view(-1, self.channels), self.idx[m, start:end],
+                   m * self.num_bins * self.num_pixels + start)
+
+    def max(self, num_voxels: int) -> Tensor:
+        """Running per-voxel maximum, -inf where empty. Shape (V + 1, C)."""
+        # index_reduce_ takes one index per row: on CPU it is ~2x faster
+        # than scatter_reduce_ and needs no (points, C) index tensor.
+        vmax = self.depth.new_full((num_voxels + 1, self.channels),
+                                   float('-inf'))
+        with warnings.catch_warnings():
+            warnings.filterwarnings('ignore', message='index_reduce')
+            for feats, vox, _ in self:
+                vmax.index_reduce_(0, vox, feats, 'amax')
+        return vmax
+
+    def winners(self, vmax: Tensor, id_dtype: torch.dtype) -> Tensor:
+        """Lowest point id reaching ``vmax``, ``total`` where none does.
+
+        The second pass over the points; only a backward needs it.
+        Shape (V + 1, C).
+        """
+        winner = torch.full(
+            vmax.shape, self.total, dtype=id_dtype, device=vmax.device)
+        with warnings.catch_warnings():
+            warnings.filterwarnings('ignore', message='index_reduce')
+            for feats, vox, first in self:
+                ids = torch.arange(
+                    first,
+                    first + feats.shape[0],
+                    dtype=id_dtype,
+                    device=vmax.device)
+                cand = torch.where(feats == vmax.index_select(0, vox),
+                                   ids.unsqueeze(1), self.total)
+                winner.index_reduce_(0, vox, cand, 'amin')
+        return winner
+
+    def occupied(self, num_voxels: int) -> Tensor:
+        """Voxels at least one point reaches. Shape (V + 1,) bool."""
+        hit = torch.zeros(
+            num_voxels + 1, dtype=torch.bool, device=self.idx.device)
+        return hit.index_fill_(0, self.idx.reshape(-1), True)
+
+
+def lift_max(depth: Tensor, context: Tensor, voxel_idx: Tensor,
+             num_voxels: int, chunk_size: int) -> Tensor:
+    """Forward-only fused lift-pool: the maxima without the winners.
+
+    The values of :class:`LiftMaxPoolFunction` (bitwise: the same maxima,
+    0 in empty voxels) from one pass over the points instead of two and
+    without the ``(V, C)`` winner buffer; :func:`lift_max_pool` takes it
+    when no gradient is needed. A non-empty voxel whose maximum is NaN
+    keeps the NaN here (the Function gives it 0: no point equals NaN).
+
+    Args:
+        depth (Tensor): Shape (M, D, h, w).
+        context (Tensor): Shape (M, C, h, w).
+        voxel_idx (Tensor): Shape (M, D, h, w), -1 outside.
+        num_voxels (int): ``V``.
+        chunk_size (int): Points per chunk.
+
+    Returns:
+        Tensor: Pooled features, 0 in empty voxels. Shape (V, C).
+    """
+    points = _LiftPoints(depth, context, voxel_idx, num_voxels, chunk_size)
+    vmax = points.max(num_voxels)
+    empty = ~points.occupied(num_voxels)
+    return vmax.masked_fill_(empty.unsqueeze(1), 0.0)[:num_voxels]
+
+
 class LiftMaxPoolFunction(Function):
     """Autograd Function of the fused lift + voxel max pool.
 
@@ -152,55 +277,14 @@ class LiftMaxPoolFunction(Function):
     def forward(ctx, depth: Tensor, context: Tensor, voxel_idx: Tensor,
                 num_voxels: int, chunk_size: int) -> Tensor:
         """See :func:`lift_max_pool`."""
-        num_images, num_bins, height, width = depth.shape
-        channels = context.shape[1]
-        num_pixels = height * width
+        points = _LiftPoints(depth, context, voxel_idx, num_voxels,
+                             chunk_size)
+        total = points.total
         # Point ids are stored in int32 when they fit: it halves the one
         # O(V * C) buffer the backward needs.
-        total = num_images * num_bins * num_pixels
         id_dtype = torch.int32 if total < 2**31 - 1 else torch.long
-        # Pixel-major context rows (a copy the size of the context) keep
-        # every chunk's product contiguous.
-        rows = context.permute(0, 2, 3, 1).reshape(num_images, num_pixels,
-                                                   channels).contiguous()
-        depth_flat = depth.reshape(num_images, num_bins * num_pixels)
-        # Points outside the volume go to a spare row V that is dropped at
-        # the end, so chunks stay dense (no masking or gathers per point).
-        idx_flat = voxel_idx.reshape(num_images, num_bins * num_pixels)
-        idx_flat = torch.where(idx_flat >= 0, idx_flat, num_voxels)
-
-        def chunk_points():
-            for m, start, end in _chunks(num_images, num_bins, num_pixels,
-                                         chunk_size):
-                bins = (end - start) // num_pixels
-                # Same float product as the naive outer product, so the
-                # values (and hence the winners) agree bitwise.
-                feats = depth_flat[m, start:end].view(bins, num_pixels, 1) * \
-                    rows[m].unsqueeze(0)
-                yield (feats.view(-1, channels), idx_flat[m, start:end],
-                       m * num_bins * num_pixels + start)
-
-        # index_reduce_ takes one index per row: on CPU it is ~2x faster
-        # than scatter_reduce_ and needs no (points, C) index tensor.
-        with warnings.catch_warnings():
-            warnings.filterwarnings('ignore', message='index_reduce')
-            vmax = depth.new_full((num_voxels + 1, channels), float('-inf'))
-            for feats, vox, _ in chunk_points():
-                vmax.index_reduce_(0, vox, feats, 'amax')
-            winner = torch.full((num_voxels + 1, channels),
-                                total,
-                                dtype=id_dtype,
-                                device=depth.device)
-            for feats, vox, first in chunk_points():
-                ids = torch.arange(
-                    first,
-                    first + feats.shape[0],
-                    dtype=id_dtype,
-                    device=depth.device)
-                cand = torch.where(feats == vmax.index_select(0, vox),
-                                   ids.unsqueeze(1), total)
-                winner.index_reduce_(0, vox, cand, 'amin')
-        winner = winner[:num_voxels]
+        vmax = points.max(num_voxels)
+        winner = points.winners(vmax, id_dtype)[:num_voxels]
         out = vmax[:num_voxels].masked_fill_(winner == total, 0.0)
         ctx.save_for_backward(depth, context, winner)
         ctx.chunk_size = chunk_size
@@ -265,8 +349,10 @@ def lift_max_pool(depth: Tensor,
         voxel_idx (Tensor): Flat voxel index of each point (bins' 3D points
             in the cylinder grid), -1 outside. int64. Shape (M, D, h, w).
         num_voxels (int): Number of voxels ``V`` (all samples together).
-        fused (bool): Use the memory-saving fused Function; False selects
-            :func:`naive_lift_max_pool`. Defaults to True.
+        fused (bool): Use the memory-saving fused path: the autograd
+            Function when a gradient is needed, else the single pass of
+            :func:`lift_max`. False selects :func:`naive_lift_max_pool`.
+            Defaults to True.
         chunk_size (int): Points per chunk of the fused path (rounded to
             whole depth bins, at least one bin of one image). Defaults to
             16384: at C = 64 its temporaries stay near 20 MiB.
@@ -281,5 +367,8 @@ def lift_max_pool(depth: Tensor,
     if not fused:
         return naive_lift_max_pool(depth, context, voxel_idx, num_voxels)
     context = context.to(depth.dtype)
+    if not (torch.is_grad_enabled() and
+            (depth.requires_grad or context.requires_grad)):
+        return lift_max(depth, context, voxel_idx, num_voxels, chunk_size)
     return LiftMaxPoolFunction.apply(depth, context, voxel_idx, num_voxels,
                                      chunk_size)

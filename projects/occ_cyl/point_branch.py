@@ -87,18 +87,31 @@ def sample_image_features(xyz: Tensor,
     # grid_sample's -1 (align_corners=False) is the left edge u = 0.
     visible = (depth >= min_depth) & (uv[..., 0] >= 0) & \
         (uv[..., 0] < img_w) & (uv[..., 1] >= 0) & (uv[..., 1] < img_h)
+    # Only the visible (camera, point) pairs are sampled: a nuScenes point
+    # is seen by 0.44 cameras on average, so sampling every point in every
+    # camera (and masking) did ~2.3x the work and held (N, P, C) buffers.
+    # Sorted by camera, then point: each camera's pairs are one slice.
+    cam, point = visible.nonzero(as_tuple=True)
     in_h, in_w = float(input_shape[0]), float(input_shape[1])
     grid = torch.stack(
-        [uv[..., 0] / in_w * 2 - 1, uv[..., 1] / in_h * 2 - 1], dim=-1)
-    # Projections behind the camera are meaningless and may be huge; park
-    # them at the centre so grid_sample stays finite, then mask them out.
-    grid = torch.where(visible[..., None], grid, torch.zeros_like(grid))
-    sampled = F.grid_sample(
-        feats, grid.unsqueeze(1).to(feats), align_corners=False)
-    sampled = sampled[:, :, 0].permute(0, 2, 1)  # (N, P, C)
-    weight = visible.to(feats.dtype).unsqueeze(-1)
-    count = weight.sum(dim=0).clamp(min=1.0)
-    return (sampled * weight).sum(dim=0) / count
+        [uv[cam, point, 0] / in_w * 2 - 1, uv[cam, point, 1] / in_h * 2 - 1],
+        dim=-1).to(feats)
+    sums = feats.new_zeros(xyz.shape[0], channels)
+    if point.numel() == 0:
+        # Nothing visible: zeros that stay connected to ``feats``, as the
+        # sampled features are when something is.
+        return sums + feats.sum() * 0
+    pieces = grid.split(visible.sum(dim=1).tolist())
+    sampled = torch.cat([
+        F.grid_sample(
+            feats[n:n + 1], cam_grid.view(1, 1, -1, 2),
+            align_corners=False)[0, :, 0].t()
+        for n, cam_grid in enumerate(pieces) if cam_grid.shape[0] > 0
+    ])  # (K, C), K visible pairs
+    # Camera by camera, as the sum over cameras it replaces.
+    sums.index_add_(0, point, sampled)
+    count = visible.sum(dim=0).clamp(min=1).to(feats.dtype)
+    return sums / count.unsqueeze(1)
 
 
 @MODELS.register_module()

@@ -8,7 +8,7 @@ from .bev_encoder import SDGBEVEncoder
 from .bev_pool import (BEVPoolIndexCache, BEVPoolIndices, bev_pool,
                        bev_pool_indices, bev_pool_mask)
 from .c2h_head import (ChannelToHeightHead, channels_to_height,
-                       height_logits_to_xyz)
+                       height_labels_to_xyz, height_logits_to_xyz)
 from .foad import FOADDistillLoss, foad_weights
 from .neighborhood_fusion import (NeighborhoodFusion, neighborhood_attention,
                                   window_starts)
@@ -26,7 +26,8 @@ __all__ = [
     'FOADDistillLoss', 'NeighborhoodFusion', 'SDGBEVEncoder', 'SDGOcc',
     'SDGViewTransform', 'bev_pool', 'bev_pool_indices', 'bev_pool_mask',
     'bilinear_incremental_discretization', 'channels_to_height',
-    'downsample_seg_labels', 'foad_weights', 'height_logits_to_xyz',
+    'downsample_seg_labels', 'foad_weights', 'height_labels_to_xyz',
+    'height_logits_to_xyz',
     'interpolate_depth_prob', 'key_frame_points', 'neighborhood_attention',
     'points_to_depth_maps', 'semantic_depth_diffusion',
     'virtual_point_depths', 'virtual_point_offsets', 'window_starts'

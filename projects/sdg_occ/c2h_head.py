@@ -28,12 +28,40 @@ def channels_to_height(x: Tensor, num_classes: int, dz: int) -> Tensor:
     Returns:
         Tensor: Shape (B, num_classes, Dz, Y, X).
     """
+    return _split_channels(x, num_classes, dz).transpose(1, 2).contiguous()
+
+
+def _split_channels(x: Tensor, num_classes: int, dz: int) -> Tensor:
+    """View ``(B, Dz * num_classes, Y, X)`` as (B, Dz, num_classes, Y, X).
+    """
     if x.dim() != 4 or x.shape[1] != num_classes * dz:
         raise ValueError(f'channels_to_height expects (B, {dz} * '
                          f'{num_classes}, Y, X), got {tuple(x.shape)}')
     batch, _, num_y, num_x = x.shape
-    return x.view(batch, dz, num_classes, num_y,
-                  num_x).transpose(1, 2).contiguous()
+    return x.view(batch, dz, num_classes, num_y, num_x)
+
+
+def height_labels_to_xyz(x: Tensor, num_classes: int, dz: int) -> Tensor:
+    """Most likely class per voxel, straight from the predictor's output.
+
+    The same labels as ``height_logits_to_xyz(channels_to_height(x, ...))
+    .argmax(dim=1)`` (ties go to the lowest class in both), but the argmax
+    runs over the class axis of the contiguous output (stride Y * X)
+    instead of a permuted copy, and only the labels, not the logits, are
+    reordered to (X, Y, Z): issue 18 measured the permuted argmax at 328
+    ms against 107 ms at paper size.
+
+    Args:
+        x (Tensor): Predictor output, channel ``z * num_classes + cls``.
+            Shape (B, Dz * num_classes, Y, X).
+        num_classes (int): Number of classes.
+        dz (int): Number Dz of height cells.
+
+    Returns:
+        Tensor: Labels, long. Shape (B, X, Y, Z).
+    """
+    labels = _split_channels(x, num_classes, dz).argmax(dim=2)
+    return labels.permute(0, 3, 2, 1).contiguous()
 
 
 def height_logits_to_xyz(logits: Tensor) -> Tensor:
@@ -159,4 +187,5 @@ class ChannelToHeightHead(BaseModule):
         Returns:
             Tensor: Labels, long. Shape (B, X, Y, Z).
         """
-        return height_logits_to_xyz(self(x)).argmax(dim=1)
+        return height_labels_to_xyz(
+            self.predictor(self.convs(x)), self.num_classes, self.dz)

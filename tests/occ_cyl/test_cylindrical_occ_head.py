@@ -4,6 +4,7 @@ import math
 import pytest
 import torch
 
+from projects.occ_common.testing.autograd_memory import saved_tensor_bytes
 from projects.occ_cyl import CylinderGrid, CylindricalOccHead
 from projects.occ_cyl.cylindrical_occ_head import sample_plane, voxel_centres
 
@@ -135,3 +136,35 @@ def test_clamping_cylinder_samples_the_border_ring_beyond_its_radius():
     near = (r < 1.5).nonzero()[0, 0]
     assert sampled[0, 0, near].item() == pytest.approx(
         float(r[near]) - 0.5, abs=1e-5)
+
+
+def test_checkpointed_scales_keep_values_and_gradients():
+    """``with_cp`` gives bitwise the same logits, loss and gradients (to
+    the planes and every parameter) and keeps less for the backward: the
+    plane samples and MLP activations of each scale are recomputed. In
+    eval or under no_grad nothing is checkpointed."""
+    gen = torch.Generator().manual_seed(3)
+    shapes = [((4, 8), (8, 2), (4, 2)), ((2, 4), (4, 1), (2, 1))]
+    planes = [[
+        torch.randn(2, 3, *hw, generator=gen, dtype=torch.float64)
+        for hw in scale
+    ] for scale in shapes]
+    gt = torch.randint(0, 4, (2, 4, 4, 2), generator=gen)
+    results = {}
+    for with_cp in (False, True):
+        head = _head(with_cp=with_cp).double()
+        inputs = [[p.clone().requires_grad_() for p in s] for s in planes]
+        logits, saved = saved_tensor_bytes(lambda: head(inputs))
+        loss = sum(head.loss(logits, gt).values())
+        grads = torch.autograd.grad(
+            loss, [p for s in inputs for p in s] + list(head.parameters()))
+        results[with_cp] = (logits, loss, grads, saved)
+    plain, cp = results[False], results[True]
+    assert all(torch.equal(a, b) for a, b in zip(plain[0], cp[0]))
+    assert torch.equal(plain[1], cp[1])
+    assert all(torch.equal(a, b) for a, b in zip(plain[2], cp[2]))
+    assert cp[3] < plain[3] / 2
+    with torch.no_grad():
+        assert all(
+            torch.equal(a, b)
+            for a, b in zip(_head(with_cp=True).double()(planes), plain[0]))

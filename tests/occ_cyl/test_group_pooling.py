@@ -3,6 +3,7 @@ import pytest
 import torch
 
 from projects.occ_cyl import SpatialGroupPooling
+from projects.occ_cyl.group_pooling import PLANE_POOL_AXES
 
 SHAPE = (2, 4, 4)  # (R, Theta, Z)
 
@@ -153,3 +154,43 @@ def test_bad_inputs_raise():
         pool.group_pool(feats, coords, SHAPE, 1, 3)
     with pytest.raises(ValueError, match='num_groups'):
         SpatialGroupPooling(2, 3, num_groups=0)
+
+
+def test_group_pool_writes_its_planes_in_place(monkeypatch):
+    """The planes are reduced into their zero buffer in place (the
+    out-of-place ``index_reduce`` first copied the buffer, the largest
+    tensor of the fusion) with unchanged values and gradients: random
+    voxels of two samples, two groups, float64, checked against the
+    out-of-place reduction and by gradcheck."""
+    gen = torch.Generator().manual_seed(2)
+    mask = torch.rand(2, *SHAPE, generator=gen) < 0.5
+    volume = torch.randn(2, 3, *SHAPE, generator=gen, dtype=torch.float64)
+    feats, coords = _rows(volume, mask)
+    feats.requires_grad_()
+    pool = SpatialGroupPooling(3, 4, num_groups=2)
+    expected = []
+    for plane in range(3):
+        pooled, (a, b) = PLANE_POOL_AXES[plane]
+        group = coords[:, pooled] // (SHAPE[pooled - 1] // 2)
+        cell = ((coords[:, 0] * SHAPE[a - 1] + coords[:, a]) *
+                SHAPE[b - 1] + coords[:, b]) * 2 + group
+        expected.append(
+            feats.new_zeros(2 * SHAPE[a - 1] * SHAPE[b - 1] * 2,
+                            3).index_reduce(0, cell, feats, 'amax',
+                                            include_self=False))
+
+    def out_of_place(*args, **kwargs):
+        raise AssertionError('group_pool copied its plane buffer')
+
+    monkeypatch.setattr(torch.Tensor, 'index_reduce', out_of_place)
+    for plane in range(3):
+        out = pool.group_pool(feats, coords, SHAPE, 2, plane)
+        flat = out.permute(0, 2, 3, 1).reshape(-1, 3)
+        assert torch.equal(flat, expected[plane])
+        g = torch.randn(flat.shape, generator=gen, dtype=torch.float64)
+        assert torch.equal(
+            torch.autograd.grad(flat, feats, g)[0],
+            torch.autograd.grad(expected[plane], feats, g,
+                                retain_graph=True)[0])
+    assert torch.autograd.gradcheck(
+        lambda f: pool.group_pool(f, coords, SHAPE, 2, 0), (feats, ))

@@ -2,8 +2,8 @@
 import pytest
 import torch
 
-from projects.occ_cyl.lift_pool import (lift_max_pool, naive_lift_max_pool,
-                                        voxel_max_pool)
+from projects.occ_cyl.lift_pool import (LiftMaxPoolFunction, lift_max_pool,
+                                        naive_lift_max_pool, voxel_max_pool)
 
 
 def _dyadic_inputs(seed, num_images=3, bins=4, h=3, w=5, channels=6,
@@ -161,3 +161,78 @@ def test_single_channel_and_channels_last_context():
         g_naive = torch.autograd.grad(naive.sum(), (depth, context))
         assert torch.equal(g_fused[0], g_naive[0])
         assert torch.equal(g_fused[1], g_naive[1])
+
+
+def _count_reductions(monkeypatch, method):
+    """Record the ``reduce`` argument of every ``Tensor.<method>`` call."""
+    calls = []
+    original = getattr(torch.Tensor, method)
+
+    def spy(self, *args, **kwargs):
+        calls.append(args[3] if len(args) > 3 else kwargs.get('reduce'))
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(torch.Tensor, method, spy)
+    return calls
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_no_grad_lift_equals_function_bitwise(seed):
+    """Without a gradient the single-pass path gives the Function's values
+    bitwise: on dyadic inputs full of ties, with empty voxels, under
+    ``no_grad`` and for inputs that do not require grad."""
+    depth, ctx, idx, voxels = _dyadic_inputs(seed, voxels=200)
+    reference = LiftMaxPoolFunction.apply(depth, ctx, idx, voxels, 7)
+    assert (reference == 0).all(dim=1).any()  # some voxel is empty
+    with torch.no_grad():
+        out = lift_max_pool(depth, ctx, idx, voxels, chunk_size=7)
+    assert torch.equal(out, reference)
+    out = lift_max_pool(depth.detach(), ctx.detach(), idx, voxels,
+                        chunk_size=7)
+    assert torch.equal(out, reference) and out.grad_fn is None
+
+
+def test_no_grad_lift_runs_one_pass(monkeypatch):
+    """Under ``no_grad`` the points are walked once (an ``amax`` reduction
+    per chunk) and no winner pass (``amin``) runs; with a gradient both
+    passes run. 3 images x 4 bins of 15 pixels in chunks of 2 bins: 6
+    chunks per pass."""
+    calls = _count_reductions(monkeypatch, 'index_reduce_')
+    depth, ctx, idx, voxels = _dyadic_inputs(4)
+    with torch.no_grad():
+        lift_max_pool(depth, ctx, idx, voxels, chunk_size=30)
+    assert calls == ['amax'] * 6
+    calls.clear()
+    lift_max_pool(depth, ctx, idx, voxels, chunk_size=30)
+    assert calls == ['amax'] * 6 + ['amin'] * 6
+
+
+def test_no_grad_lift_keeps_all_negative_infinity():
+    """An occupied voxel whose points are all -inf in a channel pools to
+    -inf in both paths (only empty voxels become 0)."""
+    depth = torch.ones(1, 1, 1, 2)
+    ctx = torch.tensor([[[[float('-inf'), 1.0]]]])
+    idx = torch.tensor([[[[0, 2]]]])
+    reference = LiftMaxPoolFunction.apply(depth, ctx, idx, 3, 4)
+    with torch.no_grad():
+        out = lift_max_pool(depth, ctx, idx, 3)
+    assert reference.view(-1).tolist() == [float('-inf'), 0.0, 1.0]
+    assert torch.equal(out, reference)
+
+
+def test_no_grad_voxel_max_pool_builds_no_winners(monkeypatch):
+    """Under ``no_grad`` the LiDAR max-pool gives the same values as with
+    a gradient (empty voxel 0, all-negative voxel negative, outside point
+    dropped) without the int64 winner scatter (no ``scatter_reduce_``)."""
+    gen = torch.Generator().manual_seed(8)
+    feats = torch.randn(40, 5, generator=gen)
+    feats[3] = float('-inf')
+    rows = torch.randint(-1, 12, (40,), generator=gen)
+    rows[rows == 11] = 10  # voxel 11 stays empty
+    reference = voxel_max_pool(feats.requires_grad_(), rows, 12)
+    calls = _count_reductions(monkeypatch, 'scatter_reduce_')
+    with torch.no_grad():
+        out = voxel_max_pool(feats, rows, 12)
+    assert calls == []
+    assert torch.equal(out, reference.detach())
+    assert out[11].tolist() == [0.0] * 5

@@ -1,7 +1,9 @@
 """Tests of the LiDAR point branch (eqs. 2-4)."""
 import pytest
 import torch
+import torch.nn.functional as F
 
+from projects.occ_common.geometry.depth import project_points
 from projects.occ_common.testing.occ_inputs import ring_camera_rig
 from projects.occ_cyl import LidarPointBranch, sample_image_features
 
@@ -122,3 +124,77 @@ def test_bad_points_raise():
     with pytest.raises(ValueError, match='2 point clouds'):
         branch([torch.zeros(3, 5)] * 2, torch.zeros(1, 4, 1, 2, 4),
                _rig()[None], (32, 64), [(32, 64)])
+
+
+def _sample_every_camera(xyz, feats, lidar2img, input_shape, img_shape):
+    """Reference: sample every point in every camera, then mask (the
+    implementation before the visible-only sampling)."""
+    uv, depth = project_points(xyz, lidar2img)
+    visible = (depth >= 0.1) & (uv[..., 0] >= 0) & \
+        (uv[..., 0] < img_shape[1]) & (uv[..., 1] >= 0) & \
+        (uv[..., 1] < img_shape[0])
+    grid = torch.stack([uv[..., 0] / input_shape[1] * 2 - 1,
+                        uv[..., 1] / input_shape[0] * 2 - 1], dim=-1)
+    grid = torch.where(visible[..., None], grid, torch.zeros_like(grid))
+    sampled = F.grid_sample(feats, grid.unsqueeze(1), align_corners=False)
+    sampled = sampled[:, :, 0].permute(0, 2, 1)
+    weight = visible.to(feats.dtype).unsqueeze(-1)
+    return (sampled * weight).sum(dim=0) / weight.sum(dim=0).clamp(min=1.0)
+
+
+def _random_scene(seed, num_points=300):
+    """Points around the 4-camera rig (some behind or beside every camera,
+    some seen by two), random 3-channel maps."""
+    gen = torch.Generator().manual_seed(seed)
+    xyz = (torch.rand(num_points, 3, generator=gen) - 0.5) * torch.tensor(
+        [40.0, 40.0, 6.0])
+    feats = torch.randn(4, 3, 2, 4, generator=gen, dtype=torch.float64)
+    return xyz, feats.requires_grad_(), gen
+
+
+@pytest.mark.parametrize('img_shape', [(32, 64), (32, 40), (20, 30)])
+def test_visible_only_sampling_equals_every_camera(img_shape):
+    """Values and the gradient to the maps equal the sample-everything
+    path (float64, random points, cropped images so that some cameras see
+    few points)."""
+    xyz, feats, gen = _random_scene(0)
+    out = sample_image_features(xyz.double(), feats, _rig().double(),
+                                (32, 64), img_shape)
+    ref = _sample_every_camera(xyz.double(), feats, _rig().double(),
+                               (32, 64), img_shape)
+    assert (ref != 0).any(dim=1).sum() > 50  # many points seen
+    torch.testing.assert_close(out, ref, rtol=1e-12, atol=1e-12)
+    grad = torch.randn(out.shape, generator=gen, dtype=torch.float64)
+    torch.testing.assert_close(
+        torch.autograd.grad(out, feats, grad)[0],
+        torch.autograd.grad(ref, feats, grad)[0],
+        rtol=1e-12,
+        atol=1e-12)
+
+
+def test_only_visible_pairs_are_sampled(monkeypatch):
+    """``grid_sample`` sees exactly the visible (camera, point) pairs: for
+    the hand-computed points of :func:`test_sample_hand_computed_mean_over_
+    cameras` 2 pairs with the full image, 1 with the cropped one (not
+    4 cameras x 2 points = 8); none visible gives zeros that still carry
+    a (zero) gradient to the maps."""
+    sampled = []
+    original = F.grid_sample
+
+    def spy(input, grid, *args, **kwargs):
+        sampled.append(grid.shape[:-1].numel())
+        return original(input, grid, *args, **kwargs)
+
+    monkeypatch.setattr(F, 'grid_sample', spy)
+    pts = torch.tensor([[4.0, 4.0, 0.0], [0.0, 0.0, 5.0]])
+    sample_image_features(pts, _feature_maps(), _rig(), (32, 64), (32, 64))
+    assert sum(sampled) == 2
+    sampled.clear()
+    sample_image_features(pts, _feature_maps(), _rig(), (32, 64), (32, 40))
+    assert sum(sampled) == 1
+    sampled.clear()
+    feats = _feature_maps().requires_grad_()
+    out = sample_image_features(pts[1:], feats, _rig(), (32, 64), (32, 64))
+    assert sampled == [] and out.tolist() == [[0.0]]
+    out.sum().backward()
+    assert not feats.grad.any()

@@ -3,7 +3,7 @@ import pytest
 import torch
 
 from projects.sdg_occ import (ChannelToHeightHead, channels_to_height,
-                              height_logits_to_xyz)
+                              height_labels_to_xyz, height_logits_to_xyz)
 
 
 def test_channel_order_is_flashocc():
@@ -27,6 +27,24 @@ def test_xyz_layout():
     xyz = height_logits_to_xyz(logits)
     assert xyz.shape == (1, 2, 5, 3, 4)
     assert xyz[0, 1, 4, 2, 3] == logits[0, 1, 3, 2, 4]
+
+
+def test_labels_from_contiguous_output_match_permuted_argmax():
+    """Labels taken on the predictor's own layout equal the argmax of the
+    reordered logits, ties included. By hand, 3 classes, Dz = 2, one cell:
+    channels (z0: 1, 5, 5 | z1: 7, 2, 7) give class 1 at z0 (the first of
+    the tied 5s) and class 0 at z1 (the first of the tied 7s)."""
+    x = torch.tensor([1., 5., 5., 7., 2., 7.]).view(1, 6, 1, 1)
+    labels = height_labels_to_xyz(x, 3, 2)
+    assert labels.shape == (1, 1, 1, 2) and labels.is_contiguous()
+    assert labels.flatten().tolist() == [1, 0]
+    torch.manual_seed(0)
+    # Rounded logits make ties common; Y != X catches a transposed layout.
+    x = torch.randn(2, 4 * 3, 5, 7).round()
+    ref = height_logits_to_xyz(channels_to_height(x, 3, 4)).argmax(1)
+    assert torch.equal(height_labels_to_xyz(x, 3, 4), ref)
+    with pytest.raises(ValueError, match='channels_to_height'):
+        height_labels_to_xyz(torch.zeros(1, 5, 2, 2), 3, 2)
 
 
 def _head(**kwargs):

@@ -5,6 +5,7 @@ import pytest
 import torch
 
 from projects.sdg_occ import NeighborhoodFusion, neighborhood_attention
+from projects.sdg_occ import neighborhood_fusion as nf
 from projects.sdg_occ.neighborhood_fusion import window_starts
 
 
@@ -63,6 +64,31 @@ def test_matches_naive_per_query_loop(ksize, border):
     out = neighborhood_attention(q, k, v, bias, ksize, border)
     ref = _naive_attention(q, k, v, bias, ksize, border)
     assert torch.allclose(out, ref, atol=1e-5)
+
+
+@pytest.mark.parametrize('border', ['shift', 'mask'])
+def test_row_blocks_match_naive_loop_and_gradients(border, monkeypatch):
+    """Interior rows split into blocks give the per-query loop's output and
+    the single-block gradients of q, k, v and the bias. A key row holds
+    1 x 2 x 3 x 4 floats = 96 bytes and a block needs 2 r = 2 rows of
+    margin, so budgets of 1, 4 x 96 and 6 x 96 bytes give blocks of 1, 2
+    and 4 output rows over the 9 - 2 = 7 interior rows."""
+    gen = torch.Generator().manual_seed(3)
+    q, k, v = (torch.randn(1, 2, 3, 9, 4, generator=gen).requires_grad_()
+               for _ in range(3))
+    bias = torch.randn(2, 5, 5, generator=gen).requires_grad_()
+    ref = _naive_attention(q.detach(), k.detach(), v.detach(),
+                           bias.detach(), 3, border)
+    whole = neighborhood_attention(q, k, v, bias, 3, border)
+    grad_out = torch.randn_like(whole)
+    grads = torch.autograd.grad(whole, (q, k, v, bias), grad_out)
+    for budget in (1, 4 * 96, 6 * 96):
+        monkeypatch.setattr(nf, 'BLOCK_BYTES', budget)
+        out = neighborhood_attention(q, k, v, bias, 3, border)
+        assert torch.allclose(out, ref, atol=1e-5)
+        for got, want in zip(
+                torch.autograd.grad(out, (q, k, v, bias), grad_out), grads):
+            assert torch.allclose(got, want, atol=1e-5)
 
 
 def _key_count(height, width, ksize, border, query):

@@ -4,11 +4,14 @@ import os.path as osp
 
 import numpy as np
 import pytest
+import torch
 
 from projects.occ_common.testing.tool_logs import load_tool
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ.py')
+SDG_CONFIG = osp.join(ROOT, 'configs', 'sdg_occ',
+                      'sdgocc-fusion_r50_4xb2-24e_occ3d-nus.py')
 
 
 def _tool():
@@ -92,3 +95,63 @@ def test_lidar_like_cloud_lies_in_range():
     assert (points[:, :3] >= np.array(pc_range[:3])).all()
     assert (points[:, :3] < np.array(pc_range[3:])).all()
     assert np.isclose(points[:, 2], -1.84, atol=1e-4).mean() > 0.2
+
+
+def test_synthetic_cloud_has_one_key_frame_sweep():
+    """11 sweeps of 10 points each: 10 points with lag 0 (the key frame),
+    then 0.05 s steps up to 0.5 s; the batch names the time column, so
+    key-frame-only steps (SDG's depth guidance) see one sweep."""
+    tool = _tool()
+    points = tool.with_sweep_time(np.zeros((110, 5), np.float32), 11)
+    assert (points[:, 4] == 0).sum() == 10
+    assert np.allclose(np.unique(points[:, 4]), 0.05 * np.arange(11))
+    cfg = tool.load_config(SDG_CONFIG, None)
+    batch, description = tool.synthetic_batch(cfg, 1, 220)
+    assert batch['data_samples'][0].metainfo['points_time_dim'] == 4
+    assert int((batch['inputs']['points'][0][:, 4] == 0).sum()) == 20
+    assert '220 points in 11 sweeps' in description
+
+
+def test_train_mode_steps_the_optimiser():
+    """--train times ``train_step``: one call changes the toy's weights
+    (SGD, lr 0.5), a prediction does not. Its GFLOP count the backward
+    too: the 1x1x1 conv's 4,608 FLOP forward plus the 4,608 FLOP of its
+    weight gradient (the input needs none), twice the prediction's."""
+    tool = _tool()
+    reports = {}
+    for mode in ('predict', 'train'):
+        args = tool.parse_args([CONFIG, '--device', 'cpu'] +
+                               (['--train'] if mode == 'train' else []))
+        subject = tool.Subject(CONFIG, None, args)
+        before = [p.detach().clone() for p in subject.model.parameters()]
+        subject.fresh_input()
+        subject.predict()
+        changed = any(not torch.equal(a, p)
+                      for a, p in zip(before, subject.model.parameters()))
+        assert changed == (mode == 'train')
+        assert subject.model.training == (mode == 'train')
+        reports[mode] = subject.static_report()
+        assert reports[mode]['mode'] == mode
+    assert reports['predict']['gflop'] * 1e9 == pytest.approx(4608)
+    assert reports['train']['gflop'] * 1e9 == pytest.approx(2 * 4608)
+    with pytest.raises(SystemExit):
+        tool.parse_args([CONFIG, '--train', '--fuse-conv-bn'])
+
+
+def test_synthetic_training_targets():
+    """Labels: 90 % empty (index 0 of the config), every one of the 17
+    classes present, int64; depth: 2 % of the pixels at 1-60 m."""
+    from mmengine.config import Config
+    tool = _tool()
+    gen = np.random.default_rng(0)
+    cfg = Config(dict(model=dict(num_classes=17, empty_index=0)))
+    occ = tool.synthetic_labels((40, 40, 8), cfg, gen)
+    assert occ.dtype == torch.long and occ.shape == (40, 40, 8)
+    assert (occ == 0).float().mean() == pytest.approx(0.9 + 0.1 / 17,
+                                                      abs=0.01)
+    assert set(occ.unique().tolist()) == set(range(17))
+    depth = tool.synthetic_depth(2, (30, 40), gen)
+    assert depth.shape == (2, 30, 40) and depth.dtype == torch.float32
+    hit = depth > 0
+    assert hit.float().mean() == pytest.approx(0.02, abs=0.01)
+    assert depth[hit].min() >= 1.0 and depth[hit].max() < 60.0

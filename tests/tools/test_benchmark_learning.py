@@ -4,6 +4,7 @@ The training runs use the toy config (tests/data/configs/toy_occ.py: 8
 training samples in batches of 2, so 4 iterations per epoch) in child
 processes, exactly as the benchmark starts them.
 """
+import argparse
 import json
 import os.path as osp
 import subprocess
@@ -11,7 +12,7 @@ import sys
 from types import SimpleNamespace
 
 import pytest
-from mmengine.config import Config
+from mmengine.config import Config, DictAction
 
 from projects.occ_common.testing.tool_logs import load_tool
 from projects.occ_common.utils import tool_runs
@@ -163,3 +164,26 @@ def test_format_table_extra_lines():
         '| | a |', '|---|---|', '| labels | Occ3D |',
         '| train time | 1.5 min |', '| IoU | 50.00 |',
         '| **mIoU** | 12.35 |', '| iterations | 7 |', '| car | n/a |']
+
+
+@pytest.mark.parametrize('name, expect', [
+    ('occcyl-tiny-nodepthsup', dict(loss_depth=None)),
+    ('sdg-camera-lss-tiny', dict(variant='camera', lidar_encoder=None,
+                                 fusion=None, loss_seg=None)),
+])
+def test_ablation_runs_switch_their_module_off(name, expect):
+    """Each named ablation run is its base config with only the named
+    modules switched off: the options merge into a config whose model has
+    those entries None (or the camera variant), while the base run's has
+    them set."""
+
+    tool = _tool()
+    config, options = tool.RUNS[name]
+    cfg = Config.fromfile(osp.join(ROOT, config))
+    parser = argparse.ArgumentParser()
+    parser.add_argument('--o', nargs='+', action=DictAction)
+    cfg.merge_from_dict(parser.parse_args(['--o', *options]).o)
+    base = Config.fromfile(osp.join(ROOT, config))
+    for key, value in expect.items():
+        assert cfg.model[key] == value
+        assert base.model.get(key) != value

@@ -88,6 +88,12 @@ model = dict(
             norm_cfg=dict(type='BN', requires_grad=True),
             norm_eval=True,
             style='pytorch',
+            # Recompute each bottleneck in the backward (not in the paper,
+            # which trains on GPUs): one 6 x 928 x 1600 training iteration
+            # then fits in memory (issue 18). Exact, as the BN statistics
+            # are frozen (norm_eval): nothing is updated twice. Training
+            # from scratch with norm_eval=False needs with_cp=False.
+            with_cp=True,
             init_cfg=None),  # weights: `pretrained` above
         neck=dict(
             type='mmdet.FPN',
@@ -97,7 +103,8 @@ model = dict(
         neck_channels=_img_channels,
         num_levels=4,
         out_channels=_v_channels,
-        out_stride=_img_stride),
+        out_stride=_img_stride,
+        with_cp=True),  # recompute the FPN in the backward, as the ResNet
     depth_net=dict(
         type='DepthNet',
         in_channels=_v_channels,
@@ -133,6 +140,10 @@ model = dict(
             strides=(2, 2, 2, 2),
             out_indices=(0, 1, 2, 3),
             drop_path_rate=0.3,  # Swin-S's (Swin paper, mmdet configs)
+            # Recompute each block in the backward, for memory as the
+            # ResNet's; exact (the drop-path masks are redrawn from the
+            # saved random state).
+            with_cp=True,
             init_cfg=None),  # weights: `pretrained` above
         neck=dict(
             type='mmdet.FPN',
@@ -144,6 +155,7 @@ model = dict(
         in_channels=_plane_channels,
         num_scales=_num_scales,
         hidden_channels=_plane_channels,
+        with_cp=True,  # recompute the 640k-voxel MLP in the backward
         # Eq. 18 over the four scales; the labels come from the detector.
         loss_occ=dict(
             type='MultiScaleOccupancyLoss',

@@ -103,33 +103,34 @@ class SceneClassAffinityLoss(OccupancyLossTerm):
         return self.loss_weight * loss
 
     def _terms(self, p: Tensor, t: Tensor) -> Tensor:
-        """Sum of the precision, recall and specificity terms.
+        """Precision, recall and specificity terms, summed, per column.
 
         Args:
-            p (Tensor): Probability of the positive class. Shape (N,).
-            t (Tensor): Binary target as float. Shape (N,).
+            p (Tensor): Probability of the positive class. Shape (N, K).
+            t (Tensor): Binary target as float. Shape (N, K).
 
         Returns:
-            Tensor: Scalar.
+            Tensor: One value per column. Shape (K,).
         """
-        true_pos = (p * t).sum()
-        precision = _neg_log_ratio(true_pos, p.sum(), self.eps)
-        recall = _neg_log_ratio(true_pos, t.sum(), self.eps)
-        true_neg = ((1.0 - p) * (1.0 - t)).sum()
-        specificity = _neg_log_ratio(true_neg, (1.0 - t).sum(), self.eps)
+        true_pos = (p * t).sum(0)
+        precision = _neg_log_ratio(true_pos, p.sum(0), self.eps)
+        recall = _neg_log_ratio(true_pos, t.sum(0), self.eps)
+        true_neg = ((1.0 - p) * (1.0 - t)).sum(0)
+        specificity = _neg_log_ratio(true_neg, (1.0 - t).sum(0), self.eps)
         return precision + recall + specificity
 
     def _geo(self, probs: Tensor, labels: Tensor) -> Tensor:
         """Geometric term: occupied vs empty."""
         occupied_prob = 1.0 - probs[:, self.empty_index]
         occupied = (labels != self.empty_index).to(probs.dtype)
-        return self._terms(occupied_prob, occupied)
+        return self._terms(occupied_prob[:, None], occupied[:, None])[0]
 
     def _sem(self, probs: Tensor, labels: Tensor) -> Tensor:
-        """Semantic term: mean over the classes present in the target."""
-        present = torch.unique(labels).tolist()
-        losses = [
-            self._terms(probs[:, c], (labels == c).to(probs.dtype))
-            for c in present
-        ]
-        return torch.stack(losses).mean()
+        """Semantic term: mean over the classes present in the target.
+
+        All present classes at once, as columns (one pass over the voxels
+        instead of one per class).
+        """
+        present = torch.unique(labels)
+        targets = (labels[:, None] == present[None]).to(probs.dtype)
+        return self._terms(probs[:, present], targets).mean()

@@ -8,8 +8,9 @@ between backends.
 from .backend import (BACKENDS, resolve_backend, spconv_available,
                       spconv_supports_cuda)
 from .dense import scatter_bev, to_dense, to_dense_bev
-from .point_voxel import (coord_index, point_to_voxel, point_voxel_offsets,
-                          scatter_mean, trilinear_devoxelize, voxel_rows)
+from .point_voxel import (TrilinearPlan, coord_index, devoxelize,
+                          point_to_voxel, point_voxel_offsets, scatter_mean,
+                          trilinear_devoxelize, trilinear_plan, voxel_rows)
 from .rulebook import (CoordIndex, Rulebook, conv_output_shape, delinearize,
                        linearize, strided_rulebook, submanifold_rulebook)
 from .sparse_blocks import SparseConvBNReLU, SparseResBlock
@@ -23,6 +24,7 @@ from .torch_backend import rulebook_conv
 
 __all__ = [
     'BACKENDS', 'CoordIndex', 'LinearBNReLU', 'Rulebook', 'SPVCNNEncoder',
+    'TrilinearPlan', 'devoxelize', 'trilinear_plan',
     'SparseBatchNorm', 'SparseConv', 'SparseConvBNReLU', 'SparseConvBase',
     'SparseInverseConv', 'SparseReLU', 'SparseResBlock', 'SparseTensor',
     'SubMConv', 'batch_norm_rows', 'conv_output_shape', 'coord_index',

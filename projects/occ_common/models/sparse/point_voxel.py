@@ -8,13 +8,13 @@ centres. Both work on any device and are differentiable with respect to
 the features.
 """
 import itertools
-from typing import Optional, Sequence
+from typing import NamedTuple, Optional, Sequence
 
 import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from .rulebook import CoordIndex, in_bounds, linearize
+from .rulebook import CoordIndex, delinearize, in_bounds, linearize
 from .sparse_tensor import SparseTensor
 
 
@@ -120,6 +120,136 @@ def point_to_voxel(x: SparseTensor, point_features: Tensor,
     return scatter_mean(point_features, rows, x.num_voxels)
 
 
+class TrilinearPlan(NamedTuple):
+    """The eight voxels each point blends, with their weights.
+
+    They depend only on the point positions and the voxel sites of one
+    grid, not on the features, so one plan serves every feature map on
+    that grid (and its backward pass).
+
+    Attributes:
+        rows (Tensor): int64 row of each corner voxel, 0 where the corner
+            is inactive or off the grid (its weight is 0). Shape (P, 8).
+        weights (Tensor): Trilinear weights renormalised over the active
+            corners; all 0 for a point with none. Shape (P, 8).
+    """
+    rows: Tensor
+    weights: Tensor
+
+
+def trilinear_plan(x: SparseTensor,
+                   batch: Tensor,
+                   position: Tensor,
+                   index: Optional[CoordIndex] = None) -> TrilinearPlan:
+    """Corner voxels and weights of :func:`trilinear_devoxelize`.
+
+    A point at ``u`` (grid units, ``(z, y, x)``) blends the voxels
+    ``base + c``, ``c`` in {0, 1}^3 (corner ``4 c_z + 2 c_y + c_x``), with
+    ``base = floor(u - 0.5)``. The corners depend only on the point's
+    ``(batch, base)`` cell, which many points share (a 0.1 m voxel of a
+    10-sweep cloud holds tens of points, and a coarser stage's cell
+    more), so the eight lookups run once per run of equal cells: with the
+    points grouped by cell, as :class:`SPVCNNEncoder` orders them, that is
+    once per cell. Any order gives the same plan, only more lookups.
+
+    Args:
+        x (SparseTensor): Voxels on a (Z, Y, X) grid.
+        batch (Tensor): Sample of each point. Shape (P,).
+        position (Tensor): Point positions in ``x``'s grid units, ordered
+            ``(z, y, x)``. Shape (P, 3).
+        index (CoordIndex, optional): Prebuilt :func:`coord_index` of
+            ``x``. Defaults to None (built here).
+
+    Returns:
+        TrilinearPlan: Rows and weights. Shape (P, 8) each.
+    """
+    num_points = position.shape[0]
+    dtype = x.features.dtype
+    if num_points == 0 or x.num_voxels == 0:
+        return TrilinearPlan(
+            torch.zeros(num_points, 8, dtype=torch.long,
+                        device=position.device),
+            torch.zeros(num_points, 8, dtype=dtype, device=position.device))
+    index = coord_index(x) if index is None else index
+    shifted = position - 0.5
+    base = torch.floor(shifted)
+    frac = (shifted - base).to(dtype)
+    base = base.long()
+    # One key per (batch, base) cell on the grid grown by one cell below
+    # (base is -1 left of the first centre); equal neighbours share their
+    # lookups. A point farther out (never one inside the grid) has no
+    # corner on the grid; clamping only keeps its key unique.
+    upper = base.new_tensor(x.spatial_shape)
+    off_grid = ((base < -1) | (base >= upper)).any(dim=1)
+    grown = tuple(n + 1 for n in x.spatial_shape)
+    cell = linearize(batch.long(),
+                     torch.minimum((base + 1).clamp(min=0), upper), grown)
+    cells, inverse = torch.unique_consecutive(cell, return_inverse=True)
+    rows = _corner_rows(delinearize(cells, grown).long(), x.spatial_shape,
+                        index).index_select(0, inverse)
+    miss = (rows < 0) | off_grid[:, None]
+    # The products run corner-major, over contiguous rows of P (a
+    # trailing axis of 2 is several times slower on CPU), and are
+    # transposed once.
+    frac = frac.t().contiguous()
+    axes = torch.stack([1.0 - frac, frac], dim=1)  # (3, 2, P)
+    weights = (axes[0][:, None, None] * axes[1][None, :, None]) * \
+        axes[2][None, None]  # (c_z, c_y, c_x, P)
+    weights = weights.reshape(8, -1).t().contiguous().masked_fill_(miss, 0.0)
+    weights = weights.div_(weights.sum(dim=1, keepdim=True).clamp_(min=1e-12))
+    return TrilinearPlan(rows.masked_fill_(miss, 0), weights)
+
+
+def _corner_rows(cells: Tensor, spatial_shape: Sequence[int],
+                 index: CoordIndex) -> Tensor:
+    """Rows of the eight corners of cells ``(batch, base + 1)``.
+
+    Args:
+        cells (Tensor): Cells on the grid grown by one, as
+            :func:`delinearize` gives them. Shape (U, 4).
+        spatial_shape (Sequence[int]): The voxel grid (Z, Y, X).
+        index (CoordIndex): Lookup of the voxels.
+
+    Returns:
+        Tensor: int64 rows, -1 where the corner is inactive or off the
+        grid, corner ``4 c_z + 2 c_y + c_x``. Shape (U, 8).
+    """
+    size_z, size_y, size_x = spatial_shape
+    batch, base = cells[:, 0], cells[:, 1:] - 1
+    x_ok = [(base[:, 2] + c >= 0) & (base[:, 2] + c < size_x) for c in (0, 1)]
+    rows = []
+    for c_z, c_y in itertools.product((0, 1), repeat=2):
+        corner_z, corner_y = base[:, 0] + c_z, base[:, 1] + c_y
+        zy_ok = (corner_z >= 0) & (corner_z < size_z) & (corner_y >= 0) & \
+            (corner_y < size_y)
+        # The two x-neighbours have consecutive keys: one search for both.
+        # Keys of out-of-grid corners may alias other voxels; masked below.
+        start = ((batch * size_z + corner_z) * size_y + corner_y) * size_x \
+            + base[:, 2]
+        for c_x, found in enumerate(index.query_run(start, 2)):
+            ok = zy_ok & x_ok[c_x]
+            rows.append(torch.where(ok, found, torch.full_like(found, -1)))
+    return torch.stack(rows, dim=1)
+
+
+def devoxelize(features: Tensor, plan: TrilinearPlan) -> Tensor:
+    """Blend voxel features at the points of a :class:`TrilinearPlan`.
+
+    Args:
+        features (Tensor): Features of the plan's voxels. Shape (N, C).
+        plan (TrilinearPlan): From :func:`trilinear_plan` on their grid.
+
+    Returns:
+        Tensor: Shape (P, C).
+    """
+    if plan.rows.shape[0] == 0 or features.shape[0] == 0:
+        return features.new_zeros(plan.rows.shape[0], features.shape[1])
+    # embedding_bag sums weighted rows without materialising (P, 8, C),
+    # which at 300k points and 128 channels would be over 1 GB.
+    return F.embedding_bag(
+        plan.rows, features, per_sample_weights=plan.weights, mode='sum')
+
+
 def trilinear_devoxelize(x: SparseTensor,
                          batch: Tensor,
                          position: Tensor,
@@ -132,53 +262,15 @@ def trilinear_devoxelize(x: SparseTensor,
     remaining weights are renormalised to sum to 1, so a point near the
     surface is not pulled towards zero. The point's own voxel is one of the
     eight and has weight >= 1/8, so the sum never vanishes when it is
-    active.
+    active. :func:`trilinear_plan`, then :func:`devoxelize`.
 
     Args:
         x (SparseTensor): Voxel features of shape (N, C).
-        batch (Tensor): Sample of each point. Shape (P,).
-        position (Tensor): Point positions in ``x``'s grid units, ordered
-            ``(z, y, x)``. Shape (P, 3).
-        index (CoordIndex, optional): Prebuilt :func:`coord_index` of
-            ``x``. Defaults to None (built here).
+        batch, position, index: The points and the optional lookup, as
+            for :func:`trilinear_plan`.
 
     Returns:
         Tensor: Interpolated features; 0 for a point with no active
         neighbour. Shape (P, C).
     """
-    num_points = position.shape[0]
-    if num_points == 0 or x.num_voxels == 0:
-        return x.features.new_zeros(num_points, x.num_channels)
-    index = coord_index(x) if index is None else index
-    size_z, size_y, size_x = x.spatial_shape
-    shifted = position - 0.5
-    base = torch.floor(shifted)
-    frac = (shifted - base).to(x.features.dtype)
-    base = base.long()
-    batch = batch.long()
-    x_ok = [(base[:, 2] + c >= 0) & (base[:, 2] + c < size_x) for c in (0, 1)]
-    x_weight = [1.0 - frac[:, 2], frac[:, 2]]
-    rows, weights = [], []
-    for c_z, c_y in itertools.product((0, 1), repeat=2):
-        corner_z, corner_y = base[:, 0] + c_z, base[:, 1] + c_y
-        zy_ok = (corner_z >= 0) & (corner_z < size_z) & (corner_y >= 0) & \
-            (corner_y < size_y)
-        zy_weight = (frac[:, 0] if c_z else 1.0 - frac[:, 0]) * \
-            (frac[:, 1] if c_y else 1.0 - frac[:, 1])
-        # The two x-neighbours have consecutive keys: one search for both.
-        # Keys of out-of-grid corners may alias other voxels; masked below.
-        start = ((batch * size_z + corner_z) * size_y + corner_y) * size_x \
-            + base[:, 2]
-        for c_x, found in enumerate(index.query_run(start, 2)):
-            hit = zy_ok & x_ok[c_x] & (found >= 0)
-            weights.append(
-                torch.where(hit, zy_weight * x_weight[c_x],
-                            torch.zeros_like(zy_weight)))
-            rows.append(torch.where(hit, found, torch.zeros_like(found)))
-    rows = torch.stack(rows, dim=1)
-    weights = torch.stack(weights, dim=1)
-    weights = weights / weights.sum(dim=1, keepdim=True).clamp(min=1e-12)
-    # embedding_bag sums weighted rows without materialising (P, 8, C),
-    # which at 300k points and 128 channels would be over 1 GB.
-    return F.embedding_bag(
-        rows, x.features, per_sample_weights=weights, mode='sum')
+    return devoxelize(x.features, trilinear_plan(x, batch, position, index))

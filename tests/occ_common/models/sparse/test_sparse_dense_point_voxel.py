@@ -5,12 +5,15 @@ import torch
 
 from projects.occ_common.models.sparse import (LinearBNReLU, SparseBatchNorm,
                                                SparseReLU, SparseResBlock,
-                                               SparseTensor, point_to_voxel,
+                                               SparseTensor, devoxelize,
+                                               point_to_voxel,
                                                point_voxel_offsets,
                                                scatter_bev, scatter_mean,
                                                to_dense, to_dense_bev,
                                                trilinear_devoxelize,
-                                               voxel_rows)
+                                               trilinear_plan, voxel_rows)
+from projects.occ_common.testing.sparse_reference import \
+    dense_trilinear_devoxelize
 
 
 def _tensor(coords, feats, shape, batch_size=1):
@@ -202,3 +205,81 @@ def test_res_block_identity_when_convs_are_zero():
     assert wider(x).features.tolist() == [[0., 0.], [0., 0.]]
     out.features.sum().backward()
     assert x.features.grad[:, 0].tolist() == [0., 1.]
+
+
+def _random_voxels(seed):
+    """Two samples on a (3, 4, 5) grid, about half the sites active, and
+    60 points: 50 inside the grid, 10 up to 1.5 cells outside it."""
+    gen = torch.Generator().manual_seed(seed)
+    shape = (3, 4, 5)
+    sites = torch.nonzero(torch.rand(2, *shape, generator=gen) < 0.5)
+    x = SparseTensor(
+        torch.randn(len(sites), 3, generator=gen).requires_grad_(),
+        sites.int(), shape, 2)
+    position = torch.rand(60, 3, generator=gen) * torch.tensor(shape)
+    position[50:] = torch.rand(
+        10, 3, generator=gen) * (torch.tensor(shape) + 3.0) - 1.5
+    batch = torch.randint(0, 2, (60, ), generator=gen)
+    return x, batch, position
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_trilinear_plan_matches_dense_reference(seed):
+    """The shared-lookup plan gives the dense grid's interpolation and its
+    feature gradient for points in any order, inside the grid or outside
+    it; every row of weights sums to 1 or (no active corner) to 0."""
+    x, batch, position = _random_voxels(seed)
+    ref = dense_trilinear_devoxelize(x, batch, position)
+    grad_out = torch.randn_like(ref)
+    ref_grad, = torch.autograd.grad(ref, x.features, grad_out)
+    for order in (torch.arange(60),
+                  torch.randperm(
+                      60, generator=torch.Generator().manual_seed(seed))):
+        plan = trilinear_plan(x, batch[order], position[order])
+        out = devoxelize(x.features, plan)
+        torch.testing.assert_close(out, ref[order])
+        grad, = torch.autograd.grad(out, x.features, grad_out[order])
+        torch.testing.assert_close(grad, ref_grad)
+        sums = plan.weights.sum(dim=1)
+        assert torch.all(((sums - 1).abs() < 1e-5) | (sums == 0))
+        assert plan.rows.shape == (60, 8) and plan.rows.min() >= 0
+    # No points.
+    assert devoxelize(x.features, trilinear_plan(x, batch[:0],
+                                                 position[:0])).shape == (0, 3)
+
+
+def test_linear_bn_relu_eval_folds_norm_training_unchanged():
+    """Eval: one folded linear layer gives ReLU(BN(Wx + b)) with the
+    running statistics, and the same gradients for W, b, gamma, beta.
+    Training: batch statistics, running statistics updated, as before."""
+    torch.manual_seed(0)
+    mlp = LinearBNReLU(5, 4)
+    with torch.no_grad():
+        mlp.norm.running_mean.uniform_(-1, 1)
+        mlp.norm.running_var.uniform_(0.5, 2)
+        mlp.norm.weight.uniform_(0.5, 1.5)
+        mlp.norm.bias.uniform_(-0.5, 0.5)
+    feats = torch.randn(30, 5)
+    params = [
+        mlp.linear.weight, mlp.linear.bias, mlp.norm.weight, mlp.norm.bias
+    ]
+    mlp.eval()
+    ref = torch.relu(
+        torch.nn.functional.batch_norm(
+            mlp.linear(feats), mlp.norm.running_mean, mlp.norm.running_var,
+            mlp.norm.weight, mlp.norm.bias, False, 0.0, mlp.norm.eps))
+    out = mlp(feats)
+    torch.testing.assert_close(out, ref)
+    for got, want in zip(
+            torch.autograd.grad(out.sum(), params),
+            torch.autograd.grad(ref.sum(), params)):
+        torch.testing.assert_close(got, want)
+    mlp.train()
+    mean_before = mlp.norm.running_mean.clone()
+    linear = mlp.linear(feats)
+    ref = torch.relu((linear - linear.mean(0)) /
+                     torch.sqrt(linear.var(0, unbiased=False) + mlp.norm.eps) *
+                     mlp.norm.weight + mlp.norm.bias)
+    torch.testing.assert_close(mlp(feats), ref)
+    torch.testing.assert_close(mlp.norm.running_mean,
+                               0.9 * mean_before + 0.1 * linear.mean(0))
