@@ -52,6 +52,8 @@ class TPVPolarFusion(BaseModule):
             Defaults to 16384.
         norm_cfg (dict): Normalisation of the MLPs and fusion.
             Defaults to BN2d.
+        with_cp (bool): Recompute the group pooling in the backward
+            (:class:`SpatialGroupPooling`'s ``with_cp``). Defaults to False.
         init_cfg (dict, optional): Initialisation config. Defaults to None.
     """
 
@@ -66,6 +68,7 @@ class TPVPolarFusion(BaseModule):
                  fused_lift: bool = True,
                  lift_chunk_size: int = 16384,
                  norm_cfg: ConfigType = dict(type='BN2d'),
+                 with_cp: bool = False,
                  init_cfg: OptMultiConfig = None) -> None:
         super().__init__(init_cfg=init_cfg)
         if not (with_camera or with_lidar):
@@ -83,11 +86,11 @@ class TPVPolarFusion(BaseModule):
         self.plane_channels = plane_channels
         if with_camera:
             self.cam_pool = SpatialGroupPooling(cam_channels, plane_channels,
-                                                num_groups, norm_cfg)
+                                                num_groups, norm_cfg, with_cp)
         if with_lidar:
             self.lidar_pool = SpatialGroupPooling(lidar_channels,
                                                   plane_channels, num_groups,
-                                                  norm_cfg)
+                                                  norm_cfg, with_cp)
         if with_camera and with_lidar:
             self.fusions = nn.ModuleList([
                 DynamicFusion2D((plane_channels, plane_channels),

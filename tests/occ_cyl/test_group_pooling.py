@@ -194,3 +194,34 @@ def test_group_pool_writes_its_planes_in_place(monkeypatch):
                                 retain_graph=True)[0])
     assert torch.autograd.gradcheck(
         lambda f: pool.group_pool(f, coords, SHAPE, 2, 0), (feats, ))
+
+
+def test_recomputed_planes_are_exact():
+    """``with_cp=True`` in training (float64): the three planes, the
+    voxel-feature gradient, every MLP gradient and the BatchNorm
+    statistics after the step equal ``with_cp=False``; each plane's MLP
+    runs twice (forward and recomputation) and the pooled (R, Theta) plane
+    of M * C = 4 channels x 2 x 4 cells is no longer kept for the
+    backward."""
+    results = []
+    for with_cp in (False, True):
+        torch.manual_seed(0)
+        pool = SpatialGroupPooling(2, 3, num_groups=2,
+                                   with_cp=with_cp).double().train()
+        calls, packed = [], []
+        pool.mlps[0].register_forward_pre_hook(lambda *a: calls.append(1))
+        feats, coords = _rows(_volume().double())
+        feats.requires_grad_()
+        with torch.autograd.graph.saved_tensors_hooks(
+                lambda t: packed.append(tuple(t.shape)) or t, lambda t: t):
+            planes = pool(feats, coords, SHAPE, 1)
+        sum((p * p).sum() for p in planes).backward()
+        results.append(([p.detach() for p in planes] + [feats.grad] +
+                        [p.grad for p in pool.parameters()] +
+                        [b.clone() for b in pool.buffers()], calls, packed))
+    (plain, plain_calls, plain_packed), (cp, cp_calls, cp_packed) = results
+    for a, b in zip(plain, cp):
+        torch.testing.assert_close(a, b, rtol=1e-12, atol=1e-12)
+    assert (len(plain_calls), len(cp_calls)) == (1, 2)
+    assert (2 * 4 * 2, 2) in plain_packed  # the pooled rows (a, b, M), C
+    assert (2 * 4 * 2, 2) not in cp_packed

@@ -116,3 +116,31 @@ def test_bins_derived_from_depth_bound():
         _net(num_depth_bins=4, depth_bound=(1.0, 51.0, 10.0))
     with pytest.raises(ValueError, match='depth_bound or num_depth_bins'):
         _net(num_depth_bins=None)
+
+
+def test_recomputed_depth_branch_is_exact():
+    """``with_cp=True`` (training, float64): outputs, every parameter's
+    gradient and every buffer (BatchNorm statistics after the step) equal
+    ``with_cp=False``; the depth branch runs twice (forward and its
+    recomputation) and its first conv's output is not kept for the
+    backward (the 8-channel 3 x 5 maps packed are fewer)."""
+    x = torch.randn(4, 8, 3, 5, dtype=torch.float64)
+    results = []
+    for with_cp in (False, True):
+        net = _net(with_cp=with_cp, camera_param_dims=22).double().train()
+        calls, packed = [], []
+        net.depth_branch.register_forward_pre_hook(
+            lambda *a: calls.append(1))
+        with torch.autograd.graph.saved_tensors_hooks(
+                lambda t: packed.append(t.shape) or t, lambda t: t):
+            out = net(x, cam_params=torch.ones(4, 22, dtype=x.dtype))
+        (out['depth'][:, 1].sum() + (out['context']**2).sum()).backward()
+        results.append(([out[k].detach() for k in sorted(out)] +
+                        [p.grad for p in net.parameters()] +
+                        [b.clone() for b in net.buffers()], calls, packed))
+    (plain, plain_calls, plain_packed), (cp, cp_calls, cp_packed) = results
+    for a, b in zip(plain, cp):
+        torch.testing.assert_close(a, b, rtol=1e-12, atol=1e-12)
+    assert (len(plain_calls), len(cp_calls)) == (1, 2)
+    maps = (4, 8, 3, 5)
+    assert cp_packed.count(maps) < plain_packed.count(maps) - 4
