@@ -92,10 +92,12 @@ def test_only_sdg_configs_read_lidarseg(path):
 def _backbones_recomputed_with_training_norms(node, where='model'):
     """Paths of config dicts that recompute activations (``with_cp``)
     while their BatchNorms train (``norm_eval=False``): the recomputed
-    forward would update the running statistics a second time."""
+    forward of mmdet's backbones would update the running statistics a
+    second time (RecomputedResNet restores them)."""
     found = []
     if isinstance(node, dict):
-        if node.get('with_cp') and node.get('norm_eval') is False:
+        if (node.get('with_cp') and node.get('norm_eval') is False
+                and node.get('type') != 'RecomputedResNet'):
             found.append(where)
         for key, value in node.items():
             found += _backbones_recomputed_with_training_norms(

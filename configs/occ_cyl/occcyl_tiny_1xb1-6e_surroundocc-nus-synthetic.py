@@ -38,9 +38,8 @@ model = dict(
             base_channels=8,
             frozen_stages=-1,
             norm_eval=False,
-            # Recomputing a backbone whose BatchNorms train would update
-            # their statistics twice per step; a tiny model needs no
-            # memory saving anyway (nor do the modules below).
+            # A tiny model needs no memory saving (nor do the modules
+            # below): recomputation would only cost time.
             with_cp=False),
         neck=dict(in_channels=[8, 16, 32, 64], out_channels=_img_channels),
         neck_channels=_img_channels,
@@ -51,7 +50,8 @@ model = dict(
         mid_channels=_img_channels,
         context_channels=_context_channels,
         num_res_blocks=1,
-        aspp_dilations=(1, 2)),
+        aspp_dilations=(1, 2),
+        with_cp=False),
     point_branch=dict(
         img_channels=_context_channels,
         geo_channels=(_point_channels, ),
@@ -60,7 +60,8 @@ model = dict(
         cam_channels=_context_channels,
         lidar_channels=_point_channels,
         plane_channels=_plane_channels,
-        num_groups=4),
+        num_groups=4,
+        with_cp=False),
     tpv_encoder=dict(
         backbone=dict(
             in_channels=_plane_channels,

@@ -79,7 +79,10 @@ model = dict(
     img_encoder=dict(
         type='MultiViewImageEncoder',
         backbone=dict(
-            type='mmdet.ResNet',
+            # mmdet.ResNet's weights and arguments; its with_cp also
+            # recomputes the first block after the frozen stage (~1.4 GiB
+            # at 6 x 928 x 1600) and keeps training BatchNorms exact.
+            type='RecomputedResNet',
             depth=50,
             num_stages=4,
             # Stages 0, 1, 2 and 3 feed the FPN (paper, Sec. IV.A).
@@ -90,9 +93,8 @@ model = dict(
             style='pytorch',
             # Recompute each bottleneck in the backward (not in the paper,
             # which trains on GPUs): one 6 x 928 x 1600 training iteration
-            # then fits in memory (issue 18). Exact, as the BN statistics
-            # are frozen (norm_eval): nothing is updated twice. Training
-            # from scratch with norm_eval=False needs with_cp=False.
+            # then fits in memory (issue 18). Exact: the recomputation
+            # updates no BatchNorm statistic a second time.
             with_cp=True,
             init_cfg=None),  # weights: `pretrained` above
         neck=dict(
@@ -111,7 +113,11 @@ model = dict(
         mid_channels=_v_channels,
         context_channels=_context_channels,
         with_depth_feature=True,
-        camera_param_dims=22),  # BEVDepth's camera-aware depth
+        camera_param_dims=22,  # BEVDepth's camera-aware depth
+        # Recompute the depth branch (3 residual blocks + ASPP at 512
+        # channels, ~1.9 GiB of kept maps at 6 x 928 x 1600) in the
+        # backward: not in the paper, for memory (issue 18); exact.
+        with_cp=True),
     point_branch=dict(
         type='LidarPointBranch',
         in_channels=_point_dims,
@@ -124,7 +130,11 @@ model = dict(
         lidar_channels=_point_channels,
         plane_channels=_plane_channels,
         num_groups=8,  # M of the spatial group pooling (paper, Table VII)
-        fused_lift=True),
+        fused_lift=True,
+        # Recompute the group pooling and its MLPs in the backward (~1.9
+        # GiB kept otherwise at the Table VI cylinder): for memory (issue
+        # 18), exact.
+        with_cp=True),
     tpv_encoder=dict(
         type='TPVPlaneEncoder',
         backbone=dict(
