@@ -2,6 +2,7 @@
 import pytest
 import torch
 
+from projects.occ_common.testing.autograd_memory import recorded_training_step
 from projects.occ_cyl import SpatialGroupPooling
 from projects.occ_cyl.group_pooling import PLANE_POOL_AXES
 
@@ -208,20 +209,15 @@ def test_recomputed_planes_are_exact():
         torch.manual_seed(0)
         pool = SpatialGroupPooling(2, 3, num_groups=2,
                                    with_cp=with_cp).double().train()
-        calls, packed = [], []
-        pool.mlps[0].register_forward_pre_hook(lambda *a: calls.append(1))
         feats, coords = _rows(_volume().double())
         feats.requires_grad_()
-        with torch.autograd.graph.saved_tensors_hooks(
-                lambda t: packed.append(tuple(t.shape)) or t, lambda t: t):
-            planes = pool(feats, coords, SHAPE, 1)
-        sum((p * p).sum() for p in planes).backward()
-        results.append(([p.detach() for p in planes] + [feats.grad] +
-                        [p.grad for p in pool.parameters()] +
-                        [b.clone() for b in pool.buffers()], calls, packed))
+        results.append(
+            recorded_training_step(pool, pool.mlps[0],
+                                   lambda: pool(feats, coords, SHAPE, 1),
+                                   lambda: [feats.grad]))
     (plain, plain_calls, plain_packed), (cp, cp_calls, cp_packed) = results
     for a, b in zip(plain, cp):
         torch.testing.assert_close(a, b, rtol=1e-12, atol=1e-12)
-    assert (len(plain_calls), len(cp_calls)) == (1, 2)
+    assert (plain_calls, cp_calls) == (1, 2)
     assert (2 * 4 * 2, 2) in plain_packed  # the pooled rows (a, b, M), C
     assert (2 * 4 * 2, 2) not in cp_packed

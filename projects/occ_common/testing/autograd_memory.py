@@ -1,7 +1,8 @@
 """What autograd keeps for the backward, for tests of memory savings."""
-from typing import Callable, Tuple, TypeVar
+from typing import Callable, List, Sequence, Tuple, TypeVar
 
 import torch
+from torch import Tensor
 
 T = TypeVar('T')
 
@@ -28,3 +29,43 @@ def saved_tensor_bytes(run: Callable[[], T]) -> Tuple[T, int]:
     with torch.autograd.graph.saved_tensors_hooks(pack, lambda t: t):
         out = run()
     return out, sum(storages.values())
+
+
+def recorded_training_step(module: torch.nn.Module, hooked: torch.nn.Module,
+                           forward: Callable[[], Sequence[Tensor]],
+                           extra: Callable[[], List[Tensor]] = list
+                           ) -> Tuple[List[Tensor], int, List[tuple]]:
+    """One forward and backward of ``module``, recorded for comparing a
+    recomputed (``with_cp``) path with the plain one.
+
+    Args:
+        module (torch.nn.Module): The module trained; its parameter
+            gradients and buffers are collected after the backward.
+        hooked (torch.nn.Module): A submodule whose calls are counted
+            (once in the forward, once more per recomputation).
+        forward (Callable[[], Sequence[Tensor]]): Runs the forward and
+            returns the outputs; the backward is taken of the sum of
+            every output times itself.
+        extra (Callable[[], list[Tensor]]): Further tensors to compare,
+            read after the backward (e.g. an input's gradient).
+
+    Returns:
+        tuple: The values (outputs, ``extra()``, parameter gradients,
+        buffers), the number of calls of ``hooked`` and the shapes of the
+        tensors packed for the backward during the forward.
+    """
+    calls, shapes = [], []
+    handle = hooked.register_forward_pre_hook(lambda *a: calls.append(1))
+
+    def pack(tensor):
+        shapes.append(tuple(tensor.shape))
+        return tensor
+
+    with torch.autograd.graph.saved_tensors_hooks(pack, lambda t: t):
+        outs = list(forward())
+    sum((out * out).sum() for out in outs).backward()
+    handle.remove()
+    values = ([out.detach() for out in outs] + list(extra()) +
+              [p.grad for p in module.parameters()] +
+              [b.clone() for b in module.buffers()])
+    return values, len(calls), shapes
