@@ -137,7 +137,8 @@ def test_without_checkpoint_frozen_random_layers_are_refused():
     model = _build(OCC_CYL, **{'pretrained.img_backbone.checkpoint': None})
     with pytest.raises(ValueError,
                        match=r'pretrained.img_backbone: no checkpoint, but '
-                       r'ResNet has frozen_stages=1, norm_eval=True'):
+                       r'RecomputedResNet has frozen_stages=1, '
+                       r'norm_eval=True'):
         model.init_weights()
 
 
