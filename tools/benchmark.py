@@ -256,9 +256,10 @@ def synthetic_batch(cfg: Config,
         batch_size (int): Samples.
         num_points (int, optional): Points per cloud.
         labels (bool): Training targets: ``gt_occ`` with
-            :func:`synthetic_labels` instead of all empty, and a
-            ``gt_depth`` map per image (:func:`synthetic_depth`). Defaults
-            to False.
+            :func:`synthetic_labels` instead of all empty, a ``gt_depth``
+            map per image (:func:`synthetic_depth`), and where the model
+            asks for them its ``loss_mask_key`` mask and ``gt_seg_2d``
+            (:func:`synthetic_seg_2d`). Defaults to False.
 
     Returns:
         tuple[dict, str]: The batch (``inputs`` and ``data_samples``, as
@@ -314,9 +315,18 @@ def synthetic_batch(cfg: Config,
         sample = Det3DDataSample(metainfo=dict(meta, sample_idx=index))
         if labels and has_imgs:
             sample.gt_depth = synthetic_depth(num_cams, cfg.img_size, gen)
+            if cfg.model.get('loss_seg') is not None:
+                sample.gt_seg_2d = synthetic_seg_2d(
+                    sample.gt_depth, cfg.model.depth_net.seg_channels, gen)
         if grid is not None:
             sample.gt_occ = (synthetic_labels(grid, cfg, gen) if labels else
                              torch.zeros(tuple(grid), dtype=torch.long))
+            mask_key = cfg.model.get('loss_mask_key')
+            if labels and mask_key:
+                # Occ3D's camera mask: a random half of the grid.
+                sample.set_field(
+                    torch.from_numpy(gen.random(tuple(grid)) < 0.5),
+                    mask_key)
             sample.set_metainfo(
                 dict(occ_voxel_size=np.asarray(cfg.voxel_size, np.float32)))
             described.append('x'.join(str(g) for g in grid) + ' grid')
@@ -355,6 +365,24 @@ def synthetic_depth(num_cams: int, img_size: Sequence[int],
     depth = gen.uniform(1.0, 60.0, shape).astype(np.float32)
     depth[gen.random(shape) >= 0.02] = 0.0
     return torch.from_numpy(depth)
+
+
+def synthetic_seg_2d(depth: torch.Tensor, num_classes: int,
+                     gen: np.random.Generator) -> torch.Tensor:
+    """2-D semantic targets as ``PointsToSemanticMaps`` makes them: a
+    uniform random class in 1..``num_classes`` - 1 at every pixel with a
+    LiDAR depth, the ignore label 255 elsewhere.
+
+    Args:
+        depth (Tensor): From :func:`synthetic_depth`. Shape (N, H, W).
+        num_classes (int): 2-D classes, 0 ("no class") included.
+
+    Returns:
+        Tensor: uint8. Shape (N, H, W).
+    """
+    seg = gen.integers(1, num_classes, tuple(depth.shape)).astype(np.uint8)
+    seg[depth.numpy() <= 0] = 255
+    return torch.from_numpy(seg)
 
 
 def test_batch(cfg: Config, batch_size: int) -> Tuple[dict, str]:

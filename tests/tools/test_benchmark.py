@@ -155,3 +155,26 @@ def test_synthetic_training_targets():
     hit = depth > 0
     assert hit.float().mean() == pytest.approx(0.02, abs=0.01)
     assert depth[hit].min() >= 1.0 and depth[hit].max() < 60.0
+
+
+def test_synthetic_training_batch_has_what_the_losses_read():
+    """SDG-Fusion on Occ3D (``--train --synthetic-batch``) reads its
+    ``mask_camera`` (loss_mask_key) and the 2-D semantic maps: the mask is
+    a bool 200 x 200 x 16 grid, about half set; ``gt_seg_2d`` has a class
+    in 1..16 exactly where the depth map has a return and the ignore label
+    255 elsewhere. Without labels neither is made."""
+    tool = _tool()
+    cfg = tool.load_config(SDG_CONFIG, None)
+    batch, _ = tool.synthetic_batch(cfg, 1, 220, labels=True)
+    sample = batch['data_samples'][0]
+    mask = sample.mask_camera
+    assert mask.dtype == torch.bool and mask.shape == (200, 200, 16)
+    assert mask.float().mean() == pytest.approx(0.5, abs=0.01)
+    seg, depth = sample.gt_seg_2d, sample.gt_depth
+    assert seg.dtype == torch.uint8 and seg.shape == depth.shape
+    hit = depth > 0
+    assert ((seg != 255) == hit).all()
+    assert set(seg[hit].unique().tolist()) == set(range(1, 17))
+    plain, _ = tool.synthetic_batch(cfg, 1, 220)
+    assert 'mask_camera' not in plain['data_samples'][0]
+    assert 'gt_seg_2d' not in plain['data_samples'][0]
