@@ -24,7 +24,10 @@ model = dict(
     img_backbone=dict(
         depth=18,
         base_channels=8,
-        norm_eval=True),
+        norm_eval=True,
+        # A tiny model needs no memory saving (nor do the modules below):
+        # recomputation would only cost time.
+        with_cp=False),
     pretrained=None,  # no download: trained from scratch
     img_neck=dict(in_channels=[32, 64], out_channels=_img_channels),
     depth_net=dict(
@@ -32,7 +35,8 @@ model = dict(
         mid_channels=_img_channels,
         context_channels=_cam_channels,
         num_res_blocks=1,
-        aspp_dilations=()),
+        aspp_dilations=(),
+        with_cp=False),
     lidar_encoder=dict(
         # One voxel per BEV cell (no down-sampling) keeps the sparse convs
         # cheap on CPU.
@@ -40,7 +44,8 @@ model = dict(
         base_channels=8,
         stage_channels=(_lidar_channels, _lidar_channels),
         stage_strides=(1, 1),
-        out_channels=_lidar_channels),
+        out_channels=_lidar_channels,
+        with_cp=False),
     fusion=dict(embed_dims=16, num_heads=2),
     bev_encoder=dict(
         in_channels=_cam_channels,

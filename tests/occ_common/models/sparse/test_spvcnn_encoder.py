@@ -322,3 +322,33 @@ def test_forward_and_gradients_match_point_by_point_reference(kwargs):
     with torch.no_grad():
         torch.testing.assert_close(enc(points)['bev'],
                                    reference_spvcnn_forward(ref, points))
+
+
+def test_recomputed_encoder_is_exact_and_keeps_only_the_points():
+    """``with_cp=True`` (training, float64, two samples of 60 and 45
+    points, more than the voxels of any level, with the point offsets'
+    MLP): the BEV map, every parameter's
+    gradient and every buffer (BatchNorm statistics after the step) equal
+    ``with_cp=False``; the stem runs twice (forward and recomputation).
+    Of the per-point activations (105 x C, C > 4), the recomputed encoder
+    keeps only the input of stage 2 (stage 1's point branch, 105 x 8);
+    the plain one keeps at least three."""
+    from projects.occ_common.testing.autograd_memory import \
+        recorded_training_step
+    clouds = [_cloud(60, 1).double(), _cloud(45, 2).double()]
+    results = []
+    for with_cp in (False, True):
+        enc = _encoder(point_offsets=True, with_cp=with_cp).double().train()
+        results.append(
+            recorded_training_step(enc, enc.stem,
+                                   lambda: [enc(clouds)['bev']]))
+    (plain, plain_calls, plain_packed), (cp, cp_calls, cp_packed) = results
+    for a, b in zip(plain, cp):
+        torch.testing.assert_close(a, b, rtol=1e-12, atol=1e-12)
+    assert (plain_calls, cp_calls) == (1, 2)
+
+    def point_features(shapes):
+        return [s for s in shapes if len(s) == 2 and s[0] == 105 and s[1] > 4]
+
+    assert len(point_features(plain_packed)) >= 3
+    assert point_features(cp_packed) == [(105, 8)]
