@@ -138,7 +138,9 @@ model = dict(
     tpv_encoder=dict(
         type='TPVPlaneEncoder',
         backbone=dict(
-            type='mmdet.SwinTransformer',
+            # mmdet.SwinTransformer's weights and arguments; its with_cp
+            # recomputes non-reentrantly (mmdet's warns on every step).
+            type='RecomputedSwinTransformer',
             in_channels=_plane_channels,
             embed_dims=_swin_dims[0],
             depths=[2, 2, 18, 2],

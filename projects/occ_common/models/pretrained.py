@@ -217,8 +217,9 @@ def checkpoint_state_dict(path: str,
 
 
 def _is_swin(module: nn.Module) -> bool:
-    return type(module).__name__ == 'SwinTransformer' and \
-        type(module).__module__.startswith('mmdet.')
+    """An mmdet Swin, or a subclass such as RecomputedSwinTransformer."""
+    from mmdet.models.backbones import SwinTransformer
+    return isinstance(module, SwinTransformer)
 
 
 def _matches(key: str, patterns) -> bool:

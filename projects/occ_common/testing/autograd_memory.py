@@ -69,3 +69,29 @@ def recorded_training_step(module: torch.nn.Module, hooked: torch.nn.Module,
               [p.grad for p in module.parameters()] +
               [b.clone() for b in module.buffers()])
     return values, len(calls), shapes
+
+
+def same_weights_pair(reference_type: type, recomputed_type: type,
+                      reference_with_cp: bool = False,
+                      **kwargs) -> Tuple[torch.nn.Module, torch.nn.Module]:
+    """An mmdet backbone and its recomputed subclass with the same
+    weights, both float64 and in training mode.
+
+    Args:
+        reference_type (type): The mmdet class, e.g. ``ResNet``.
+        recomputed_type (type): Its recomputed subclass, built with
+            ``with_cp=True``.
+        reference_with_cp (bool): The reference's own ``with_cp``.
+            Defaults to False.
+        **kwargs: Constructor arguments of both.
+
+    Returns:
+        tuple: The reference and the recomputed module.
+    """
+    torch.manual_seed(0)
+    reference = reference_type(with_cp=reference_with_cp, **kwargs).double()
+    recomputed = recomputed_type(with_cp=True, **kwargs).double()
+    recomputed.load_state_dict(reference.state_dict())
+    reference.train()  # mmdet's train() returns None: not chained
+    recomputed.train()
+    return reference, recomputed

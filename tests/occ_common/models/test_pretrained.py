@@ -164,10 +164,10 @@ def test_style_must_agree_with_backbone_and_normalisation(tmp_path):
                            caffe)['loaded'] > 0
 
 
-def _swin(in_channels, patch_size):
+def _swin(in_channels, patch_size, kind='mmdet.SwinTransformer'):
     torch.manual_seed(0)
     return MODELS.build(
-        dict(type='mmdet.SwinTransformer', in_channels=in_channels,
+        dict(type=kind, in_channels=in_channels,
              embed_dims=8, depths=(1, 2), num_heads=(1, 2), window_size=2,
              patch_size=patch_size, strides=(patch_size, 2),
              out_indices=(0, 1), pretrain_img_size=8))
@@ -202,8 +202,10 @@ def _official_swin_file(path):
     return state
 
 
+@pytest.mark.parametrize('kind', [
+    'mmdet.SwinTransformer', 'RecomputedSwinTransformer'])
 def test_swin_imagenet_weights_load_all_but_the_patch_embedding(
-        tmp_path, log_lines):
+        kind, tmp_path, log_lines):
     """Official ImageNet Swin weights into the plane encoder's Swin (128
     channels in the paper, 5 here, 2 x 2 patches): the keys are converted
     (mmdet's swin_converter), everything loads except the patch
@@ -212,7 +214,7 @@ def test_swin_imagenet_weights_load_all_but_the_patch_embedding(
     patch embedding keeps its initialisation."""
     path = str(tmp_path / 'swin.pth')
     official = _official_swin_file(path)
-    plane_swin = _swin(5, 2)
+    plane_swin = _swin(5, 2, kind)
     projection = plane_swin.patch_embed.projection.weight.clone()
     report = load_pretrained(plane_swin, 'tpv',
                              _entry(checkpoint=path, **SWIN_ENTRY))

@@ -4,10 +4,11 @@ from mmdet.models.backbones import ResNet
 from torch import Tensor
 
 from ..layers.checkpointing import checkpoint_if_grad
+from .recomputed_blocks import RecomputedBlocks
 
 
 @MODELS.register_module()
-class RecomputedResNet(ResNet):
+class RecomputedResNet(RecomputedBlocks, ResNet):
     """``mmdet.ResNet`` whose ``with_cp`` recomputes every trainable block.
 
     The weights, their names and everything but ``with_cp`` are those of
@@ -26,18 +27,9 @@ class RecomputedResNet(ResNet):
       statistics once per forward; mmdet's reentrant recomputation
       updates them a second time.
 
-    Args:
-        *args: ``mmdet.ResNet``'s positional arguments.
-        with_cp (bool): Recompute the blocks in the backward. Defaults to
-            False.
-        **kwargs: ``mmdet.ResNet``'s other keyword arguments.
+    Args: those of ``mmdet.ResNet`` (``with_cp``: see
+    :class:`.RecomputedBlocks`).
     """
-
-    def __init__(self, *args, with_cp: bool = False, **kwargs) -> None:
-        # The blocks are built without mmdet's reentrant recomputation;
-        # forward() applies its own.
-        super().__init__(*args, with_cp=False, **kwargs)
-        self.with_cp = with_cp
 
     def forward(self, x: Tensor) -> tuple:
         """Stem, then the residual stages block by block.

@@ -4,7 +4,8 @@ import torch
 from mmdet.models.backbones import ResNet
 
 from projects.occ_common.models.backbones import RecomputedResNet
-from projects.occ_common.testing.autograd_memory import saved_tensor_bytes
+from projects.occ_common.testing.autograd_memory import (same_weights_pair,
+                                                         saved_tensor_bytes)
 
 
 def _pair(norm_eval, reference_with_cp):
@@ -14,13 +15,8 @@ def _pair(norm_eval, reference_with_cp):
     kwargs = dict(depth=50, base_channels=4, num_stages=4,
                   out_indices=(0, 1, 2, 3), frozen_stages=1,
                   norm_eval=norm_eval)
-    torch.manual_seed(0)
-    reference = ResNet(with_cp=reference_with_cp, **kwargs).double()
-    recomputed = RecomputedResNet(with_cp=True, **kwargs).double()
-    recomputed.load_state_dict(reference.state_dict())
-    reference.train()  # mmdet's train() returns None
-    recomputed.train()
-    return reference, recomputed
+    return same_weights_pair(ResNet, RecomputedResNet, reference_with_cp,
+                             **kwargs)
 
 
 def _step(model, x):
