@@ -332,7 +332,7 @@ class SPVCNNEncoder(BaseModule):
             - bev_mask: True where a cell holds a LiDAR voxel.
               Shape (B, 1, H, W), bool.
         """
-        # Recomputed in segments (input and stem, then each stage) so that
+        # Recomputed in segments (the stem, then each stage) so that
         # the backward rebuilds one segment's activations at a time; the
         # per-point features between segments are kept.
         segment = self._group_points(points)
