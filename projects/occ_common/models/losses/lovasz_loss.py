@@ -63,17 +63,35 @@ def lovasz_softmax_flat(
     columns = selected.nonzero()[:, 0]
     fg = F.one_hot(labels, num_classes)[:, columns].to(probs.dtype)
     errors = (fg - probs[:, columns]).abs()
-    errors_sorted, order = torch.sort(errors, dim=0, descending=True)
+    total = total[columns].to(probs.dtype)
     with torch.no_grad():
-        fg_sorted = fg.gather(0, order)
-        total = total[columns].to(probs.dtype)
-        intersection = total - fg_sorted.cumsum(0)
-        # The union is >= 1 from the first voxel on: either the class has
-        # voxels (total >= 1) or the first sorted voxel is a non-member.
-        union = total + (1.0 - fg_sorted).cumsum(0)
-        jaccard = 1.0 - intersection / union
-        grad = torch.cat([jaccard[:1], jaccard[1:] - jaccard[:-1]], dim=0)
-    per_class = (errors_sorted * grad).sum(0)
+        # Past the last member of F_c in the sorted order the intersection
+        # is 0, so J_k = 1 from there on and g_k = 0: those voxels add
+        # nothing to the loss or its gradient. They are exactly the
+        # non-members whose error is below every member's, so only errors
+        # >= the smallest member error are sorted (for a class without
+        # members, only the largest error, whose g is 1). Early in training
+        # and for the small classes this drops most voxels.
+        member_min = torch.where(fg > 0, errors,
+                                 errors.new_tensor(float('inf'))).amin(0)
+        cut = torch.where(total > 0, member_min, errors.amax(0))
+        kept = errors >= cut
+    per_class = []
+    for j in range(len(columns)):
+        rows = kept[:, j].nonzero()[:, 0]
+        errors_sorted, order = torch.sort(
+            errors[rows, j], descending=True)
+        with torch.no_grad():
+            fg_sorted = fg[rows, j][order]
+            intersection = total[j] - fg_sorted.cumsum(0)
+            # The union is >= 1 from the first voxel on: either the class
+            # has voxels (total >= 1) or the first sorted voxel is a
+            # non-member.
+            union = total[j] + (1.0 - fg_sorted).cumsum(0)
+            jaccard = 1.0 - intersection / union
+            grad = torch.cat([jaccard[:1], jaccard[1:] - jaccard[:-1]])
+        per_class.append((errors_sorted * grad).sum())
+    per_class = torch.stack(per_class)
     if class_weight is not None:
         per_class = per_class * per_class.new_tensor(
             list(class_weight))[columns]

@@ -5,6 +5,7 @@ import pytest
 import torch
 
 from projects.occ_common.models.losses import OccLovaszLoss
+from projects.occ_common.models.losses.lovasz_loss import lovasz_softmax_flat
 
 LN3 = math.log(3.0)
 
@@ -127,3 +128,67 @@ def test_lovasz_present_sorts_only_present_classes_same_values():
     torch.testing.assert_close(g_present, g_listed)
     everything = OccLovaszLoss(classes='all')(logits, labels)
     assert not torch.isclose(present, everything)
+
+
+def _lovasz_by_definition(probs, labels, classes):
+    """Berman et al.'s Algorithm 1, one class at a time over every voxel
+    (the full sort), as the reference of the pruned sort."""
+    terms = []
+    for c in classes:
+        member = (labels == c).to(probs.dtype)
+        errors = (member - probs[:, c]).abs()
+        errors_sorted, order = torch.sort(errors, descending=True)
+        member_sorted = member[order]
+        gts = member.sum()
+        jaccard = 1.0 - (gts - member_sorted.cumsum(0)) / (
+            gts + (1.0 - member_sorted).cumsum(0))
+        jaccard[1:] = jaccard[1:] - jaccard[:-1].clone()
+        terms.append((errors_sorted * jaccard).sum())
+    return torch.stack(terms).mean()
+
+
+@pytest.mark.parametrize('classes', ['present', 'all'])
+def test_lovasz_sorts_only_the_voxels_that_count(classes, monkeypatch):
+    """Voxels whose error is below every member's sort after the last
+    member, where g = 0: leaving them out of the sort changes neither the
+    loss nor its gradient (float64, 1e-12 against the full-sort definition),
+    and each class's sort sees only the voxels with an error >= its
+    smallest member error (one voxel for an absent class).
+
+    400 voxels, 85 % of them class 0 ("free"), 5 % each class 1-3, class 4
+    absent; logits N(0, 1) plus 3 on the true class."""
+    gen = torch.Generator().manual_seed(3)
+    labels = torch.multinomial(
+        torch.tensor([0.85, 0.05, 0.05, 0.05, 0.0]), 400, replacement=True,
+        generator=gen)
+    logits = torch.randn(400, 5, generator=gen, dtype=torch.float64)
+    logits[torch.arange(400), labels] += 3.0
+    logits.requires_grad_()
+    sizes = []
+    real_sort = torch.sort
+
+    def counting_sort(values, *args, **kwargs):
+        sizes.append(values.numel())
+        return real_sort(values, *args, **kwargs)
+
+    monkeypatch.setattr(torch, 'sort', counting_sort)
+    probs = torch.softmax(logits, dim=1)
+    loss = lovasz_softmax_flat(probs, labels, classes)
+    (grad, ) = torch.autograd.grad(loss, logits, retain_graph=True)
+    monkeypatch.setattr(torch, 'sort', real_sort)
+    chosen = list(range(4) if classes == 'present' else range(5))
+    expected = _lovasz_by_definition(probs, labels, chosen)
+    (expected_grad, ) = torch.autograd.grad(expected, logits)
+    torch.testing.assert_close(loss, expected, rtol=0, atol=1e-12)
+    torch.testing.assert_close(grad, expected_grad, rtol=0, atol=1e-12)
+    with torch.no_grad():
+        wanted = []
+        for c in chosen:
+            errors = ((labels == c).double() - probs[:, c]).abs()
+            members = errors[labels == c]
+            cut = members.min() if len(members) else errors.max()
+            wanted.append(int((errors >= cut).sum()))
+    assert sizes == wanted
+    assert wanted[-1] == (1 if classes == 'all' else wanted[-1])
+    # 394 + 294 + 192 + 217 (+ 1) of 400 per class.
+    assert sum(sizes) < 0.7 * 400 * len(chosen)
