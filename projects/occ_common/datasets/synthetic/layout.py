@@ -8,6 +8,11 @@ along both kerbs, a construction zone with cones, barriers and a
 construction vehicle, traffic in four lanes (a lead car in the ego's lane),
 pedestrians, bicycles and benches on the sidewalks.
 
+Every scene shows each object class near the ego's path (see
+:data:`_ALWAYS_NEAR`): the random draws alone leave the rare ones (a bus
+in one scene of four, a trailer in one of three) out of a small world's
+validation scenes, where mIoU then cannot measure them.
+
 Nothing ever enters the ego's lane except the lead car, which drives at the
 ego's mean speed, so the sensors never start inside an object.
 """
@@ -74,6 +79,12 @@ _LANES = ((-1.75, 1), (-4.75, 1), (1.75, -1), (4.75, -1))
 # outer lane and on the 8.5 m half-width street.
 _PARKING_V = 7.2
 _TRUNK_COLOUR = (0.30, 0.20, 0.10)
+#: Metres around the ego's mid-scene position within which each scene
+#: places one of every rare object class (a parked trailer and motorcycle,
+#: a bus and a motorcycle in traffic, a bicycle and a bench): well inside
+#: the 40 m (Occ3D) and 50 m (SurroundOcc) label ranges for the scene's
+#: whole length.
+_ALWAYS_NEAR = 20.0
 
 
 class _BoxList:
@@ -133,10 +144,13 @@ def _free(layout: RoadLayout, u: float, v: float, half_length: float,
 
 
 def _place_static(boxes: _BoxList, u_range: Tuple[float, float],
-                  zone: Tuple[float, float, int]) -> None:
-    """Buildings, trees, hedges, parked vehicles and sidewalk furniture."""
+                  zone: Tuple[float, float, int], focus: float) -> None:
+    """Buildings, trees, hedges, parked vehicles and sidewalk furniture;
+    a parked trailer on one side and a parked motorcycle on the other, a
+    bicycle and a bench, each within :data:`_ALWAYS_NEAR` of ``focus``."""
     layout, rng = boxes.layout, boxes.rng
     kerb = layout.road_half_width + layout.sidewalk_width
+    trailer_side = int(rng.choice([-1, 1]))
     for side in (-1, 1):
         u = u_range[0] + rng.uniform(0, 6)
         while u < u_range[1]:  # buildings
@@ -165,17 +179,25 @@ def _place_static(boxes: _BoxList, u_range: Tuple[float, float],
                 boxes.add(RAW_VEGETATION, u, side * (kerb + 3),
                           (rng.uniform(4, 9), 0.9, 1.2), annotated=False)
             u += rng.uniform(9, 16)
+        # The first free parking place past a random point near the focus
+        # gets this side's rare vehicle.
+        rare = RAW_TRAILER if side == trailer_side else RAW_MOTORCYCLE
+        rare_from = focus + rng.uniform(-_ALWAYS_NEAR, _ALWAYS_NEAR / 2)
         u = u_range[0] + rng.uniform(0, 5)
         while u < u_range[1]:  # parked vehicles along the kerb
-            kind = rng.choice([RAW_CAR, RAW_TRUCK, RAW_MOTORCYCLE,
-                               RAW_TRAILER], p=[0.8, 0.1, 0.05, 0.05])
+            forced = rare is not None and u >= rare_from
+            kind = rare if forced else rng.choice(
+                [RAW_CAR, RAW_TRUCK, RAW_MOTORCYCLE, RAW_TRAILER],
+                p=[0.8, 0.1, 0.05, 0.05])
             size = boxes.sample_size(kind)
             center = u + size[0] / 2
             # The zone and its construction vehicle (parked just after it).
             in_zone = (zone[2] == side
                        and zone[0] - 6 < center < zone[1] + 14)
-            if (rng.random() < 0.6 and not in_zone
+            if ((forced or rng.random() < 0.6) and not in_zone
                     and not layout.in_cross_street(np.array(center), 3.0)):
+                if forced:
+                    rare = None
                 v = side * (_PARKING_V + (0.5 if kind == RAW_MOTORCYCLE
                                           else 0.0))
                 attribute = ('cycle.without_rider' if kind == RAW_MOTORCYCLE
@@ -185,12 +207,21 @@ def _place_static(boxes: _BoxList, u_range: Tuple[float, float],
                 boxes.add(kind, center, v, size, rel_yaw=yaw,
                           attribute=attribute)
             u += size[0] + rng.uniform(1.2, 4.0)
+        # One side's first sidewalk place past the focus gets a bicycle,
+        # the other side's a bench.
+        rare = RAW_BICYCLE if side == trailer_side else RAW_STATIC_OTHER
+        rare_from = focus + rng.uniform(-_ALWAYS_NEAR, _ALWAYS_NEAR / 2)
         u = u_range[0] + rng.uniform(0, 10)
         while u < u_range[1]:  # bicycles and benches on the sidewalk
             # Along the sidewalk's outer edge, clear of the pedestrians.
             v = side * (kerb - 0.45)
             if not layout.in_cross_street(np.array(u), 2.0):
-                if rng.random() < 0.5:
+                forced = rare is not None and u >= rare_from
+                if forced:
+                    bicycle, rare = rare == RAW_BICYCLE, None
+                else:
+                    bicycle = rng.random() < 0.5
+                if bicycle:
                     boxes.add(RAW_BICYCLE, u, v,
                               boxes.sample_size(RAW_BICYCLE),
                               rel_yaw=rng.uniform(-0.05, 0.05),
@@ -226,10 +257,13 @@ def _place_construction_zone(boxes: _BoxList,
 
 
 def _place_traffic(boxes: _BoxList, ego: EgoMotion, duration: float,
-                   u_range: Tuple[float, float]) -> None:
-    """Moving vehicles in the four lanes, then the pedestrians."""
+                   u_range: Tuple[float, float], focus: float) -> None:
+    """Moving vehicles in the four lanes, then the pedestrians; a bus in
+    the inner oncoming lane and a motorcycle in the ego's outer lane pass
+    within :data:`_ALWAYS_NEAR` of ``focus`` at mid-scene."""
     rng = boxes.rng
     mean_speed = ego.speed + 0.5 * ego.accel * duration
+    rare_vehicle = {1.75: RAW_BUS, -4.75: RAW_MOTORCYCLE}
     for lane_v, direction in _LANES:
         if lane_v == ego.lane_v:
             # A lead car at the ego's mean speed keeps a safe gap.
@@ -246,10 +280,18 @@ def _place_traffic(boxes: _BoxList, ego: EgoMotion, duration: float,
                            [RAW_CAR, RAW_MOTORCYCLE], [0.92, 0.08])
         # One speed per lane: vehicles never catch up with each other.
         speed = rng.uniform(4.0, 10.0)
+        rare = rare_vehicle.get(lane_v)
+        # Where the rare vehicle starts so that it is near the focus at
+        # mid-scene.
+        rare_from = (focus + rng.uniform(-_ALWAYS_NEAR, _ALWAYS_NEAR / 2)
+                     - direction * speed * duration / 2)
         # Spawn far enough out that traffic stays around the ego.
         u = u_range[0] - speed * duration + rng.uniform(0, 10)
         while u < u_range[1] + speed * duration:
-            kind = rng.choice(kinds, p=odds)
+            if rare is not None and u >= rare_from:
+                kind, rare = rare, None
+            else:
+                kind = rng.choice(kinds, p=odds)
             size = boxes.sample_size(kind)
             boxes.add(kind, u + size[0] / 2, lane_v, size,
                       rel_yaw=0.0 if direction > 0 else np.pi,
@@ -342,9 +384,10 @@ def build_world(rng: np.random.Generator, duration: float, is_rainy: bool,
     zone = (zone_start, zone_start + rng.uniform(12, 20),
             int(rng.choice([-1, 1])))
     boxes = _BoxList(layout, rng)
-    _place_static(boxes, u_range, zone)
+    focus = ego.road_state(duration / 2)[0]
+    _place_static(boxes, u_range, zone, focus)
     _place_construction_zone(boxes, zone)
-    _place_traffic(boxes, ego, duration, u_range)
+    _place_traffic(boxes, ego, duration, u_range, focus)
     parts = (['Night'] if is_night else []) + (['rain'] if is_rainy else [])
     parts += ['parked cars', 'peds on sidewalk', 'construction zone',
               'intersection']
