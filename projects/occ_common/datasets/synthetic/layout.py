@@ -143,6 +143,16 @@ def _free(layout: RoadLayout, u: float, v: float, half_length: float,
     return not layout.in_flat_patch(us, np.full(3, v), margin).any()
 
 
+def _take_rare(u: float, rare, rare_from: float, step: float):
+    """Whether the slot at ``u`` takes the pending rare object, and the
+    slot's start: the last slot before ``rare_from`` (slots being at most
+    ``step`` apart) moves up to ``rare_from``, so the rare object starts
+    there rather than up to a step later."""
+    if rare is None or u < rare_from - step:
+        return False, u
+    return True, max(u, rare_from)
+
+
 def _place_static(boxes: _BoxList, u_range: Tuple[float, float],
                   zone: Tuple[float, float, int], focus: float) -> None:
     """Buildings, trees, hedges, parked vehicles and sidewalk furniture;
@@ -150,7 +160,8 @@ def _place_static(boxes: _BoxList, u_range: Tuple[float, float],
     bicycle and a bench, each within :data:`_ALWAYS_NEAR` of ``focus``."""
     layout, rng = boxes.layout, boxes.rng
     kerb = layout.road_half_width + layout.sidewalk_width
-    trailer_side = int(rng.choice([-1, 1]))
+    # Opposite the construction zone, which would push it away.
+    trailer_side = -zone[2]
     for side in (-1, 1):
         u = u_range[0] + rng.uniform(0, 6)
         while u < u_range[1]:  # buildings
@@ -183,9 +194,14 @@ def _place_static(boxes: _BoxList, u_range: Tuple[float, float],
         # gets this side's rare vehicle.
         rare = RAW_TRAILER if side == trailer_side else RAW_MOTORCYCLE
         rare_from = focus + rng.uniform(-_ALWAYS_NEAR, _ALWAYS_NEAR / 2)
+        for _ in range(8):  # clear of the cross streets (120 m apart)
+            if not layout.in_cross_street(np.array(rare_from + 6.0), 9.0):
+                break
+            rare_from = focus + rng.uniform(-_ALWAYS_NEAR, _ALWAYS_NEAR / 2)
         u = u_range[0] + rng.uniform(0, 5)
         while u < u_range[1]:  # parked vehicles along the kerb
-            forced = rare is not None and u >= rare_from
+            # Slots advance by a vehicle (<= 11 m) and a 1.2-4 m gap.
+            forced, u = _take_rare(u, rare, rare_from, 15.0)
             kind = rare if forced else rng.choice(
                 [RAW_CAR, RAW_TRUCK, RAW_MOTORCYCLE, RAW_TRAILER],
                 p=[0.8, 0.1, 0.05, 0.05])
@@ -215,8 +231,8 @@ def _place_static(boxes: _BoxList, u_range: Tuple[float, float],
         while u < u_range[1]:  # bicycles and benches on the sidewalk
             # Along the sidewalk's outer edge, clear of the pedestrians.
             v = side * (kerb - 0.45)
+            forced, u = _take_rare(u, rare, rare_from, 25.0)
             if not layout.in_cross_street(np.array(u), 2.0):
-                forced = rare is not None and u >= rare_from
                 if forced:
                     bicycle, rare = rare == RAW_BICYCLE, None
                 else:
@@ -288,7 +304,9 @@ def _place_traffic(boxes: _BoxList, ego: EgoMotion, duration: float,
         # Spawn far enough out that traffic stays around the ego.
         u = u_range[0] - speed * duration + rng.uniform(0, 10)
         while u < u_range[1] + speed * duration:
-            if rare is not None and u >= rare_from:
+            # Slots advance by a vehicle (<= 12.5 m) and a 10-35 m gap.
+            forced, u = _take_rare(u, rare, rare_from, 47.5)
+            if forced:
                 kind, rare = rare, None
             else:
                 kind = rng.choice(kinds, p=odds)
