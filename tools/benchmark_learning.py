@@ -40,6 +40,14 @@ from projects.occ_common.utils.tool_runs import (data_options, format_table,
                                                  prepare_world,
                                                  read_json_lines, run, tool)
 
+#: The camera-only LSS baseline of SDG-OCC's Table 3 as --cfg-options of
+#: an SDG-Fusion config (the deltas of configs/sdg_occ/ablations/
+#: sdgocc-camera-lss_*).
+_CAMERA_LSS = [
+    'model.variant=camera', 'model.lidar_encoder=None', 'model.fusion=None',
+    'model.view_transform.use_sdg=False', 'model.depth_net.seg_channels=0',
+    'model.loss_seg=None'
+]
 #: Named runs: name -> (config, extra --cfg-options).
 RUNS = {
     'occcyl-tiny': ('configs/occ_cyl/'
@@ -51,20 +59,25 @@ RUNS = {
                     'sdgocc-kl_tiny_1xb1-6e_occ3d-nus-synthetic.py', []),
     # The ablation rows at tiny size: the same deltas as
     # configs/occ_cyl/ablations/occcyl-nodepthsup_* (Table V) and
-    # configs/sdg_occ/ablations/sdgocc-camera-lss_* (Table 3's baseline).
+    # _CAMERA_LSS.
     'occcyl-tiny-nodepthsup': ('configs/occ_cyl/occcyl_tiny_1xb1-6e_'
                                'surroundocc-nus-synthetic.py',
                                ['model.loss_depth=None']),
     'sdg-camera-lss-tiny': ('configs/sdg_occ/sdgocc-fusion_tiny_1xb1-6e_'
-                            'occ3d-nus-synthetic.py', [
-                                'model.variant=camera',
-                                'model.lidar_encoder=None',
-                                'model.fusion=None',
-                                'model.view_transform.use_sdg=False',
-                                'model.depth_net.seg_channels=0',
-                                'model.loss_seg=None'
-                            ]),
+                            'occ3d-nus-synthetic.py', _CAMERA_LSS),
 }
+# The small configs (the paper's modules at widths and resolutions two CPU
+# cores train in under an hour) and the same ablation rows.
+_OCC_SMALL = ('configs/occ_cyl/'
+              'occcyl_small_1xb1-12e_surroundocc-nus-synthetic.py')
+_SDG_SMALL = 'configs/sdg_occ/sdgocc-{}_small_1xb1-20e_occ3d-nus-synthetic.py'
+RUNS.update({
+    'occcyl-small': (_OCC_SMALL, []),
+    'occcyl-small-nodepthsup': (_OCC_SMALL, ['model.loss_depth=None']),
+    'sdg-fusion-small': (_SDG_SMALL.format('fusion'), []),
+    'sdg-kl-small': (_SDG_SMALL.format('kl'), []),
+    'sdg-camera-lss-small': (_SDG_SMALL.format('fusion'), _CAMERA_LSS),
+})
 #: Files of a run folder.
 RESULT, SETTINGS, CLOCK = 'result.json', 'settings.json', 'train_clock.json'
 

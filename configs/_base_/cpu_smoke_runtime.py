@@ -4,4 +4,8 @@ _base_ = ['./default_runtime.py']
 
 default_hooks = dict(
     logger=dict(interval=1), checkpoint=dict(max_keep_ckpts=1))
+# Each line shows its own iteration's loss: default_runtime's window of 50
+# would log the running mean of the run so far, which hides whether the
+# last iterations' loss is below the first ones'.
+log_processor = dict(window_size=1)
 randomness = dict(seed=0)

@@ -26,6 +26,8 @@ OCC3D = osp.join(CONFIG_DIR, 'occcyl_r50-swins_3xb1-24e_occ3d-nus.py')
 LITE = osp.join(CONFIG_DIR,
                 'occcyl-lite_r50-swint_3xb1-24e_surroundocc-nus.py')
 TINY = osp.join(CONFIG_DIR, 'occcyl_tiny_1xb1-6e_surroundocc-nus-synthetic.py')
+SMALL = osp.join(CONFIG_DIR,
+                 'occcyl_small_1xb1-12e_surroundocc-nus-synthetic.py')
 
 #: What each config changes in the model of the config it builds on.
 COUPLED = {'point_cloud_range', 'voxel_size', 'num_classes', 'empty_index'}
@@ -40,6 +42,21 @@ DELTAS = {
         'img_encoder.out_channels', 'depth_net.in_channels',
         'depth_net.mid_channels', 'tpv_encoder.backbone.depths',
         'tpv_encoder.backbone.drop_path_rate'
+    }),
+    # The learning benchmark's small model: the tiny one with a finer
+    # cylinder and depth bins and twice the widths.
+    SMALL: (TINY, {
+        'cylinder.shape', 'depth_bound', 'depth_net.context_channels',
+        'depth_net.in_channels', 'depth_net.mid_channels',
+        'img_encoder.backbone.base_channels', 'img_encoder.neck.in_channels',
+        'img_encoder.neck.out_channels', 'img_encoder.neck_channels',
+        'img_encoder.out_channels', 'occ_head.hidden_channels',
+        'occ_head.in_channels', 'point_branch.geo_channels',
+        'point_branch.img_channels', 'point_branch.out_channels',
+        'tpv_encoder.backbone.embed_dims', 'tpv_encoder.backbone.in_channels',
+        'tpv_encoder.backbone.num_heads', 'tpv_encoder.neck.in_channels',
+        'tpv_encoder.neck.out_channels', 'tpv_fusion.cam_channels',
+        'tpv_fusion.lidar_channels', 'tpv_fusion.plane_channels'
     }),
     # Table V (3), VI (2) and VII (3): one knob each.
     'occcyl-nodepthsup': (PAPER, {'loss_depth'}),
@@ -59,14 +76,15 @@ def _name(path):
 
 def test_config_inventory():
     """The paper's config, its Occ3D variant, the lighter model, the tiny
-    synthetic config and the deltas of Tables V (3 files), VI (2) and VII
-    (3)."""
-    assert set(MAIN) == {PAPER, OCC3D, LITE, TINY}
-    assert {_name(p) for p in ABLATIONS} | {PAPER, OCC3D, LITE} == set(DELTAS)
+    and small synthetic configs and the deltas of Tables V (3 files), VI
+    (2) and VII (3)."""
+    assert set(MAIN) == {PAPER, OCC3D, LITE, TINY, SMALL}
+    assert ({_name(p) for p in ABLATIONS} | {PAPER, OCC3D, LITE, SMALL}
+            == set(DELTAS))
 
 
 @pytest.mark.parametrize(
-    'path', [PAPER, OCC3D, LITE] + ABLATIONS,
+    'path', [PAPER, OCC3D, LITE, SMALL] + ABLATIONS,
     ids=lambda p: osp.basename(p)[:-3])
 def test_each_delta_changes_only_its_documented_keys(path):
     """Compared with the config it builds on, a config changes exactly the

@@ -29,6 +29,11 @@ def _tiny(variant):
 TINY_FUSION = _tiny('fusion')
 
 
+def _small(variant):
+    return osp.join(CONFIG_DIR,
+                    f'sdgocc-{variant}_small_1xb1-20e_occ3d-nus-synthetic.py')
+
+
 def _main(variant, dataset):
     return osp.join(CONFIG_DIR, f'sdgocc-{variant}_r50_4xb2-24e_{dataset}.py')
 
@@ -61,6 +66,10 @@ DELTAS = {
     KL: (FUSION, KL_KEYS),
     _main('kl', 'surroundocc-nus'): (FUSION_SOCC, KL_KEYS),
     _tiny('kl'): (TINY_FUSION, KL_KEYS),
+    # The learning benchmark's small configs: the tiny model with sweeps
+    # and a longer schedule (data and schedule only), and its SDG-KL.
+    _small('fusion'): (TINY_FUSION, set()),
+    _small('kl'): (_small('fusion'), KL_KEYS),
     # The temporal variants (T = 2): the frame count, nothing else.
     _main('fusion-2f', 'occ3d-nus'): (FUSION, {'num_frames'}),
     _tiny('fusion-2f'): (TINY_FUSION, {'num_frames'}),
@@ -76,15 +85,15 @@ def _name(path):
 
 
 def test_config_inventory():
-    """Both variants on both datasets, two tiny configs and the deltas of
-    Tables 3 (3 files; SDG + FOAD is the main fusion config), 4 (6) and 5
-    (4)."""
+    """Both variants on both datasets, as tiny and small synthetic configs,
+    and the deltas of Tables 3 (3 files; SDG + FOAD is the main fusion
+    config), 4 (6) and 5 (4)."""
     names = {osp.basename(p) for p in MAIN}
     for variant in ('fusion', 'kl'):
         for dataset in ('occ3d-nus', 'surroundocc-nus'):
             assert osp.basename(_main(variant, dataset)) in names
-        assert (f'sdgocc-{variant}_tiny_1xb1-6e_occ3d-nus-synthetic.py'
-                in names)
+        assert osp.basename(_tiny(variant)) in names
+        assert osp.basename(_small(variant)) in names
     assert len(ABLATIONS) == 13
     table3 = sorted(_name(p) for p in ABLATIONS if _name(p) in DELTAS)
     assert table3 == [

@@ -166,10 +166,15 @@ def test_format_table_extra_lines():
         '| **mIoU** | 12.35 |', '| iterations | 7 |', '| car | n/a |']
 
 
+_CAMERA_OFF = dict(variant='camera', lidar_encoder=None, fusion=None,
+                   loss_seg=None)
+
+
 @pytest.mark.parametrize('name, expect', [
     ('occcyl-tiny-nodepthsup', dict(loss_depth=None)),
-    ('sdg-camera-lss-tiny', dict(variant='camera', lidar_encoder=None,
-                                 fusion=None, loss_seg=None)),
+    ('occcyl-small-nodepthsup', dict(loss_depth=None)),
+    ('sdg-camera-lss-tiny', _CAMERA_OFF),
+    ('sdg-camera-lss-small', _CAMERA_OFF),
 ])
 def test_ablation_runs_switch_their_module_off(name, expect):
     """Each named ablation run is its base config with only the named
