@@ -9,6 +9,7 @@ from .atomic_file_backend import (AtomicLocalBackend, atomic_write,
 from .augmentation_seed_hook import AugmentationSeedHook
 from .checkpoint_match_hook import CheckpointMatchHook
 from .checkpoint_recovery_hook import CheckpointRecoveryHook
+from .cpu_malloc_tuning_hook import CPUMallocTuningHook
 from .non_finite_loss_hook import NonFiniteLossError, NonFiniteLossHook
 from .occ_visualization_hook import OccVisualizationHook
 from .safe_checkpoint_hook import SafeCheckpointHook
@@ -16,7 +17,7 @@ from .weights_only_checkpoint_hook import WeightsOnlyCheckpointHook
 
 __all__ = [
     'AtomicLocalBackend', 'AugmentationSeedHook', 'CheckpointMatchHook',
-    'CheckpointRecoveryHook', 'NonFiniteLossError',
+    'CheckpointRecoveryHook', 'CPUMallocTuningHook', 'NonFiniteLossError',
     'NonFiniteLossHook', 'OccVisualizationHook', 'SafeCheckpointHook',
     'WeightsOnlyCheckpointHook', 'atomic_write', 'register_atomic_backend'
 ]
