@@ -113,6 +113,11 @@ def parse_args(argv=None):
     parser.add_argument('--max-minutes', type=float, default=None,
                         help='stop a run after this much training time '
                         '(validation excluded); it then counts as finished')
+    parser.add_argument(
+        '--max-cpu-minutes', type=float, default=None,
+        help='stop a run after this much training CPU time (all threads, '
+        'validation excluded): a budget that does not shrink when other '
+        'jobs share the machine')
     parser.add_argument('--log-interval', type=int, default=10,
                         help='log the training loss every N iterations')
     parser.add_argument('--pictures', type=int, default=3,
@@ -230,10 +235,12 @@ def _initial_val_hook():
     return InitialVal()
 
 
-def _train_clock_hook(max_seconds: Optional[float], path: str):
+def _train_clock_hook(max_seconds: Optional[float], path: str,
+                      max_cpu_seconds: Optional[float] = None):
     """A hook that measures training time (validation excluded), stores it
     in every checkpoint (so a resumed run keeps counting), writes it to
-    ``path`` and ends training after ``max_seconds``.
+    ``path`` and ends training after ``max_seconds`` of wall time or
+    ``max_cpu_seconds`` of CPU time, whichever comes first.
 
     Besides wall time it sums the process's CPU time: on a machine shared
     with other jobs the wall time grows with the load, the CPU time (all
@@ -268,14 +275,17 @@ def _train_clock_hook(max_seconds: Optional[float], path: str):
             self.cpu_seconds += now[1] - self.mark[1]
             self.mark = now
             loop = runner.train_loop
-            if (max_seconds is not None and self.seconds >= max_seconds
-                    and runner.iter + 1 < loop.max_iters):
+            spent = ((max_seconds is not None and self.seconds >= max_seconds)
+                     or (max_cpu_seconds is not None
+                         and self.cpu_seconds >= max_cpu_seconds))
+            if spent and runner.iter + 1 < loop.max_iters:
                 # This iteration becomes the last: CheckpointHook saves it
                 # (save_last) and the loop validates it.
                 loop._max_iters = runner.iter + 1
                 self.stopped_by_time = True
                 runner.logger.info(
-                    f'TrainClock: {self.seconds / 60:.1f} min of training '
+                    f'TrainClock: {self.seconds / 60:.1f} min '
+                    f'({self.cpu_seconds / 60:.1f} CPU-min) of training '
                     f'reached; stopping after iteration {runner.iter + 1}')
 
         def after_val_epoch(self, runner, metrics=None):
@@ -299,6 +309,10 @@ def _train_clock_hook(max_seconds: Optional[float], path: str):
     return TrainClock()
 
 
+def _seconds(minutes: Optional[float]) -> Optional[float]:
+    return None if minutes is None else 60.0 * minutes
+
+
 def train_one(spec: dict) -> None:
     """Train one run (in the child process); see :func:`bench_run`."""
     import train as train_tool  # tools/ is on sys.path: this is a script
@@ -317,10 +331,10 @@ def train_one(spec: dict) -> None:
                                      spec['val_interval'], epoch_length,
                                      spec['log_interval'])
     runner = Runner.from_cfg(cfg)
-    max_seconds = (None if spec['max_minutes'] is None else
-                   60.0 * spec['max_minutes'])
     runner.register_hook(
-        _train_clock_hook(max_seconds, osp.join(work_dir, CLOCK)))
+        _train_clock_hook(_seconds(spec['max_minutes']),
+                          osp.join(work_dir, CLOCK),
+                          _seconds(spec.get('max_cpu_minutes'))))
     runner.register_hook(_initial_val_hook())
     evaluator = cfg.val_evaluator
     info = dict(
@@ -425,6 +439,10 @@ def bench_run(name: str, config: str, options: List[str], args,
                     val_interval=args.val_interval,
                     max_minutes=args.max_minutes,
                     log_interval=args.log_interval)
+    max_cpu_minutes = getattr(args, 'max_cpu_minutes', None)
+    if max_cpu_minutes is not None:
+        # Only when set: run folders made before the option stay reusable.
+        settings['max_cpu_minutes'] = max_cpu_minutes
     for path in (osp.join(run_dir, RESULT), osp.join(run_dir, SETTINGS)):
         if osp.isfile(path):
             old = _load_json(path)

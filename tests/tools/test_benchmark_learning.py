@@ -71,9 +71,10 @@ def test_budget_none_keeps_length():
     assert cfg.param_scheduler[1]['milestones'] == [80, 110]
 
 
-def _spec(work_dir, iters, max_minutes=None):
+def _spec(work_dir, iters, max_minutes=None, max_cpu_minutes=None):
     return dict(config=CONFIG, options=[], iters=iters, val_interval=3,
-                max_minutes=max_minutes, log_interval=1, work_dir=work_dir)
+                max_minutes=max_minutes, max_cpu_minutes=max_cpu_minutes,
+                log_interval=1, work_dir=work_dir)
 
 
 def _train(spec):
@@ -105,13 +106,14 @@ def test_resume_continues_curves_and_clock(tmp_path):
 
 
 @pytest.mark.slow
-def test_time_limit_stops_and_validates(tmp_path):
-    """A limit of 60 ns is reached in the first iteration however fast the
-    machine (a toy iteration can take under the 6 ms once used here):
-    training ends there, iteration 1 is checkpointed (save_last) and
-    validated."""
+@pytest.mark.parametrize('limit', ['max_minutes', 'max_cpu_minutes'])
+def test_time_limit_stops_and_validates(tmp_path, limit):
+    """A limit of 60 ns (wall or CPU time) is reached in the first
+    iteration however fast the machine (a toy iteration can take under the
+    6 ms once used here): training ends there, iteration 1 is checkpointed
+    (save_last) and validated."""
     work = str(tmp_path / 'train')
-    clock = _train(_spec(work, 6, max_minutes=1e-9))
+    clock = _train(_spec(work, 6, **{limit: 1e-9}))
     assert (clock['iterations'], clock['stopped_by_time']) == (1, True)
     assert osp.isfile(osp.join(work, 'iter_1.pth'))
     assert [s for s, _ in _tool().read_curves(work)['val']] == [0, 1]
