@@ -50,6 +50,12 @@ class OccupancyMetric(BaseMetric):
     In both, a class that occurs in neither GT nor prediction has no IoU
     (NaN in its key) and is left out of the mean, as Occ3D's ``nanmean``.
 
+    With ``class_voxel_counts`` the metrics also hold
+    ``'gt_voxels/{class}'``: the number of counted GT voxels of each class
+    (after the ignore label and the camera mask), so that a reader can
+    tell a class the model fails from one the split hardly contains; the
+    printed table then has a column of them.
+
     Optional breakdowns: ``subsets`` gives ``'{name}/IoU'`` and
     ``'{name}/mIoU'`` over the samples whose ``'is_{name}'`` flag is true
     (OccCylindrical Tables II-III: rainy, night); ``distance_ranges`` gives
@@ -90,6 +96,8 @@ class OccupancyMetric(BaseMetric):
             ``(x0, y0, z0, x1, y1, z1)`` in ego coordinates; required with
             ``distance_ranges``. Defaults to None.
         ignore_index (int): GT label of unannotated voxels. Defaults to 255.
+        class_voxel_counts (bool): Add the GT voxel count of every class to
+            the metrics and the table. Defaults to False.
         format_only (bool): Write the predictions, score nothing. Needs
             ``submission_prefix``. Defaults to False.
         submission_prefix (str, optional): Folder of the prediction files.
@@ -113,6 +121,7 @@ class OccupancyMetric(BaseMetric):
                  voxel_size: Optional[Sequence[float]] = None,
                  point_cloud_range: Optional[Sequence[float]] = None,
                  ignore_index: int = 255,
+                 class_voxel_counts: bool = False,
                  format_only: bool = False,
                  submission_prefix: Optional[str] = None,
                  collect_device: str = 'cpu',
@@ -147,6 +156,7 @@ class OccupancyMetric(BaseMetric):
         self.submission_prefix = submission_prefix
         self.subsets = tuple(subsets or ())
         self.ignore_index = ignore_index
+        self.class_voxel_counts = bool(class_voxel_counts)
         self.distance_ranges = self._check_ranges(distance_ranges)
         self._occ_shape: Optional[Tuple[int, int, int]] = None
         self._range_masks: Dict[str, torch.Tensor] = {}
@@ -336,6 +346,11 @@ class OccupancyMetric(BaseMetric):
             name: float(iou) * 100
             for name, iou in zip(self.class_names, per_class_iou(total))
         })
+        if self.class_voxel_counts:
+            metrics.update({
+                f'gt_voxels/{name}': int(count)
+                for name, count in zip(self.class_names, total.sum(1))
+            })
         for subset in self.subsets:
             confusion = sum((r['confusion']
                              for r in results if subset in r['subsets']),
@@ -379,11 +394,15 @@ class OccupancyMetric(BaseMetric):
         header = 'class'.ljust(width) + ''.join(n.rjust(14) for n in names)
         ious = {n: per_class_iou(c) * 100 for n, c in columns.items()}
         scores = {n: self._scores(c) for n, c in columns.items()}
+        counts = columns['all'].sum(1) if self.class_voxel_counts else None
+        if counts is not None:
+            header += 'GT voxels'.rjust(14)
         lines = [f'Occupancy ({self.convention}) per-class IoU (%):', header]
         for c, class_name in enumerate(self.class_names):
             suffix = ' *' if c == self.empty_index else ''
             lines.append((class_name + suffix).ljust(width) +
-                         ''.join(f'{ious[n][c]:14.2f}' for n in names))
+                         ''.join(f'{ious[n][c]:14.2f}' for n in names) +
+                         ('' if counts is None else f'{counts[c]:14d}'))
         for key in ('IoU', 'mIoU'):
             lines.append(
                 key.ljust(width) +

@@ -101,6 +101,29 @@ def test_occ3d_camera_mask_hand_computed():
     assert unmasked['IoU'] == pytest.approx(100 / 3)
 
 
+def test_class_voxel_counts_after_ignore_and_camera_mask():
+    """The Occ3D sample above with class_voxel_counts: GT rows after the
+    mask (v7, a free voxel, is not counted): others v2, v6 -> 2; a v3, v4
+    -> 2; b none -> 0; free v0, v1, v5 -> 3. Off by default."""
+    gt = [3, 3, 0, 1, 1, 3, 0, 3]
+    pred = [3, 1, 0, 1, 3, 3, 3, 2]
+    mask = [1, 1, 1, 1, 1, 1, 1, 0]
+    metrics, table = _run(
+        OccupancyMetric(convention='occ3d', class_names=OCC3D4,
+                        class_voxel_counts=True),
+        [_sample(gt, pred, mask=mask)])
+    assert {k: v for k, v in metrics.items() if k.startswith('gt_')} == {
+        'gt_voxels/others': 2, 'gt_voxels/a': 2, 'gt_voxels/b': 0,
+        'gt_voxels/free': 3}
+    assert 'GT voxels' in table
+    assert table.splitlines()[3].split() == ['a', '33.33', '2']
+    plain, table = _run(
+        OccupancyMetric(convention='occ3d', class_names=OCC3D4),
+        [_sample(gt, pred, mask=mask)])
+    assert not any(k.startswith('gt_voxels') for k in plain)
+    assert 'GT voxels' not in table
+
+
 def _two_samples(**flags_b):
     """Classes (empty, a, b), 4 voxels each.
 
