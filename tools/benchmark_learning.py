@@ -35,9 +35,11 @@ import os.path as osp
 import time
 from typing import Dict, List, Optional
 
-from projects.occ_common.utils.tool_runs import (data_options, format_table,
-                                                 last_metrics, pct,
-                                                 prepare_world,
+from projects.occ_common.utils.tool_runs import (LARGE_CLASS_MIN_IOU,
+                                                 LARGE_CLASS_VOXELS,
+                                                 data_options, format_table,
+                                                 large_classes, last_metrics,
+                                                 pct, prepare_world,
                                                  read_json_lines, run, tool)
 
 #: The camera-only LSS baseline of SDG-OCC's Table 3 as --cfg-options of
@@ -467,7 +469,8 @@ def bench_run(name: str, config: str, options: List[str], args,
     test_dir = osp.join(run_dir, 'test')
     cmd = tool('test.py') + [config, _last_checkpoint(work_dir),
                              '--work-dir', test_dir]
-    test_options = list(options)
+    # The GT voxels of every class, for the table's large-class line.
+    test_options = list(options) + ['test_evaluator.class_voxel_counts=True']
     if args.pictures > 0:
         # Spread the pictures over the val split (its length is known from
         # the last validation's sample count only inside the Runner, so
@@ -512,6 +515,17 @@ def _best_val(row: dict) -> str:
     return f'{pct(best)} ({step})'
 
 
+def _weak_large_classes(row: dict) -> str:
+    """Classes with >= LARGE_CLASS_VOXELS GT voxels at IoU <=
+    LARGE_CLASS_MIN_IOU ('none' when every large class is above it)."""
+    metrics = row['metrics']
+    if not any(k.startswith('occ/gt_voxels/') for k in metrics):
+        return 'n/a'
+    weak = [name for name in large_classes(metrics)
+            if not metrics.get(f'occ/{name}', 0.0) > LARGE_CLASS_MIN_IOU]
+    return ', '.join(weak) or 'none'
+
+
 def main(argv=None):
     """Run the benchmark (or, with ``--train-one``, one training run)."""
     args = parse_args(argv)
@@ -542,11 +556,13 @@ def main(argv=None):
         ('epochs', lambda r: f'{r["iterations"] / r["epoch_length"]:.1f}'),
         ('params', lambda r: f'{r["params"] / 1e6:.2f} M'),
         ('best val mIoU (at it)', _best_val),
+        (f'classes of >= {LARGE_CLASS_VOXELS:,} GT voxels at IoU <= '
+         f'{LARGE_CLASS_MIN_IOU:g}', _weak_large_classes),
     ])
     header = (f'Held-out synthetic scenes ({args.val_scenes} of '
               f'{args.scenes}, {args.samples} key frames each, '
               f'{args.image_size[0]}x{args.image_size[1]} images); '
-              f'IoU in %.\n\n')
+              f'IoU in %, a class line\'s bracket: its GT voxels.\n\n')
     with open(osp.join(out, 'results.md'), 'w') as f:
         f.write(header + table + '\n')
     with open(osp.join(out, 'results.json'), 'w') as f:

@@ -21,9 +21,10 @@ import os.path as osp
 import shutil
 import time
 
-from projects.occ_common.utils.tool_runs import (data_options, format_table,
-                                                 last_metrics, pct,
-                                                 prepare_world, run, tool)
+from projects.occ_common.utils.tool_runs import (LARGE_CLASS_VOXELS,
+                                                 data_options, format_table,
+                                                 large_classes, last_metrics,
+                                                 pct, prepare_world, run, tool)
 
 #: (name, config, label convention, epochs). The epochs fit the demo's
 #: 20-minute budget on 2 idle CPU cores (OccCylindrical ~2.5 s and SDG-Fusion
@@ -83,6 +84,25 @@ def evaluate_untrained(config: str, work_dir: str, *options: str) -> None:
     Runner.from_cfg(cfg).test()
 
 
+#: A class of the validation split with at least LARGE_CLASS_VOXELS GT
+#: voxels has been learned when training gained this many IoU points.
+MIN_GAIN = 5.0
+#: Evaluations log the GT voxels of every class (the table's brackets).
+COUNTS = 'test_evaluator.class_voxel_counts=True'
+
+
+def unlearned_large_classes(row: dict) -> str:
+    """Large classes (see :func:`large_classes`) whose IoU rose by less
+    than MIN_GAIN points over the untrained model's ('none' if all rose)."""
+    trained, untrained = row['metrics'], row['untrained']
+    slow = [
+        name for name in large_classes(trained)
+        if not trained.get(f'occ/{name}', 0.0) >=
+        untrained.get(f'occ/{name}', 0.0) + MIN_GAIN
+    ]
+    return ', '.join(slow) or 'none'
+
+
 def main(argv=None):
     """Run the demo."""
     args = parse_args(argv)
@@ -109,8 +129,8 @@ def main(argv=None):
         data = data_options(data_root)
 
         run(tool('demo.py') +
-            ['--baseline', config, osp.join(work, 'untrained')] + data,
-            log_path)
+            ['--baseline', config, osp.join(work, 'untrained')] + data +
+            [COUNTS], log_path)
         untrained = last_metrics(osp.join(work, 'untrained'))
 
         tic = time.time()
@@ -129,7 +149,7 @@ def main(argv=None):
             osp.join(work, 'train', f'epoch_{epochs}.pth'), '--work-dir',
             osp.join(work, 'test'), '--show-dir', pictures,
             '--cfg-options'
-        ] + data, log_path)
+        ] + data + [COUNTS], log_path)
         rows.append(
             dict(
                 name=name,
@@ -144,7 +164,9 @@ def main(argv=None):
     table = format_table(
         rows, [('epochs', lambda r: str(r['epochs'])),
                ('mIoU untrained',
-                lambda r: pct(r['untrained'].get('occ/mIoU')))])
+                lambda r: pct(r['untrained'].get('occ/mIoU'))),
+               (f'classes of >= {LARGE_CLASS_VOXELS:,} GT voxels that gained '
+                f'< {MIN_GAIN:g} IoU points', unlearned_large_classes)])
     with open(osp.join(out, 'results.md'), 'w') as f:
         f.write(table + '\n')
     with open(osp.join(out, 'results.json'), 'w') as f:

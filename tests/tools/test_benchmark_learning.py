@@ -168,6 +168,28 @@ def test_format_table_extra_lines():
         '| **mIoU** | 12.35 |', '| iterations | 7 |', '| car | n/a |']
 
 
+def test_class_lines_show_gt_voxels_and_weak_large_classes():
+    """With the metric's GT counts a class cell reads 'IoU (GT voxels)';
+    the large-class line names the classes of >= 1,000 GT voxels at IoU
+    <= 10: car (5.00, 2,000 voxels) but neither bus (60.00) nor bicycle
+    (0.00, only 999 voxels) nor free (the IoU line's business)."""
+    metrics = {'occ/IoU': 50.0, 'occ/mIoU': 20.0, 'occ/car': 5.0,
+               'occ/bus': 60.0, 'occ/bicycle': 0.0, 'occ/free': 90.0,
+               'occ/gt_voxels/car': 2000, 'occ/gt_voxels/bus': 1000,
+               'occ/gt_voxels/bicycle': 999, 'occ/gt_voxels/free': 10**6}
+    row = dict(name='a', labels='Occ3D', train_s=60.0, metrics=metrics)
+    table = tool_runs.format_table([row])
+    assert '| car | 5.00 (2,000) |' in table.splitlines()
+    assert '| bicycle | 0.00 (999) |' in table.splitlines()
+    assert _tool()._weak_large_classes(row) == 'car'
+    metrics['occ/car'] = 10.5
+    assert _tool()._weak_large_classes(row) == 'none'
+    del metrics['occ/gt_voxels/car']
+    assert tool_runs.large_classes(metrics) == ['bus']
+    row['metrics'] = {'occ/mIoU': 1.0}
+    assert _tool()._weak_large_classes(row) == 'n/a'
+
+
 _CAMERA_OFF = dict(variant='camera', lidar_encoder=None, fusion=None,
                    loss_seg=None)
 

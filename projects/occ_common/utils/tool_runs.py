@@ -163,6 +163,34 @@ def class_keys(rows: Sequence[dict]) -> List[str]:
     return classes
 
 
+#: Key prefix of OccupancyMetric's GT voxel counts (class_voxel_counts).
+GT_VOXELS = 'occ/gt_voxels/'
+#: The learning benchmark's bar: a class with at least this many GT voxels
+#: in the held-out split should score above LARGE_CLASS_MIN_IOU.
+LARGE_CLASS_VOXELS = 1000
+LARGE_CLASS_MIN_IOU = 10.0
+
+
+def large_classes(metrics: Dict[str, float],
+                  min_voxels: int = LARGE_CLASS_VOXELS) -> List[str]:
+    """Classes with at least ``min_voxels`` GT voxels in ``metrics``
+    (none when the metric logged no counts), without the empty class of
+    either convention (SurroundOcc's ``empty``, Occ3D's ``free``): that
+    one is the ``IoU`` line's business."""
+    return [
+        key[len(GT_VOXELS):] for key, count in metrics.items()
+        if key.startswith(GT_VOXELS) and count >= min_voxels
+        and key[len(GT_VOXELS):] not in ('empty', 'free')
+    ]
+
+
+def class_cell(metrics: Dict[str, float], name: str) -> str:
+    """IoU of class ``name``, with its GT voxel count when logged."""
+    cell = pct(metrics.get(f'occ/{name}'))
+    count = metrics.get(GT_VOXELS + name)
+    return cell if count is None else f'{cell} ({int(count):,})'
+
+
 def pct(value) -> str:
     """A percentage with two decimals, ``n/a`` for None / NaN."""
     return 'n/a' if value is None or value != value else f'{value:.2f}'
@@ -194,5 +222,5 @@ def format_table(rows: List[dict], extra: Sequence[tuple] = ()) -> str:
     for label, fn in extra:
         add(label, [fn(r) for r in rows])
     for name in class_keys(rows):
-        add(name, [pct(r['metrics'].get(f'occ/{name}')) for r in rows])
+        add(name, [class_cell(r['metrics'], name) for r in rows])
     return '\n'.join(lines)
