@@ -132,6 +132,10 @@ def parse_args(argv=None):
         help='appended to every run name, e.g. to keep a variant made with '
         '--cfg-options beside the original')
     parser.add_argument(
+        '--retest', action='store_true',
+        help='test the last checkpoint of finished runs again (e.g. after '
+        'a change of the metric) instead of reusing their results')
+    parser.add_argument(
         '--train-one', metavar='SPEC_JSON', help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if not args.train_one and not (args.runs or args.config):
@@ -429,6 +433,9 @@ def bench_run(name: str, config: str, options: List[str], args,
               data_root: Optional[str], out: str, log_path: str) -> dict:
     """Train (or resume, or reuse) one run and evaluate it.
 
+    A finished run is reused as it is, or with ``args.retest`` its last
+    checkpoint is tested again and its row rewritten.
+
     Returns:
         dict: The run's row: ``name``, ``config``, ``labels``,
         ``train_s``, ``iterations``, ``metrics`` (test), ``curves``, paths.
@@ -453,16 +460,17 @@ def bench_run(name: str, config: str, options: List[str], args,
                 raise SystemExit(
                     f'{run_dir} was made with other settings ({old} != '
                     f'{settings}); remove it or use another --suffix.')
-    if osp.isfile(osp.join(run_dir, RESULT)):
+    finished = osp.isfile(osp.join(run_dir, RESULT))
+    if finished and not getattr(args, 'retest', False):
         print(f'\n{name}: finished earlier, reusing {run_dir}/{RESULT}')
         return _load_json(osp.join(run_dir, RESULT))
-    os.makedirs(work_dir, exist_ok=True)
-    with open(osp.join(run_dir, SETTINGS), 'w') as f:
-        json.dump(settings, f, indent=1)
-
-    spec = dict(settings, work_dir=work_dir)
-    run(tool('benchmark_learning.py') + ['--train-one', json.dumps(spec)],
-        log_path, f'training {name}')
+    if not finished:
+        os.makedirs(work_dir, exist_ok=True)
+        with open(osp.join(run_dir, SETTINGS), 'w') as f:
+            json.dump(settings, f, indent=1)
+        spec = dict(settings, work_dir=work_dir)
+        run(tool('benchmark_learning.py') +
+            ['--train-one', json.dumps(spec)], log_path, f'training {name}')
     clock = _load_json(osp.join(work_dir, CLOCK))
     info = _load_json(osp.join(work_dir, 'run_info.json'))
 

@@ -5,6 +5,7 @@ training samples in batches of 2, so 4 iterations per epoch) in child
 processes, exactly as the benchmark starts them.
 """
 import argparse
+import glob
 import json
 import os.path as osp
 import subprocess
@@ -139,6 +140,24 @@ def test_bench_run_writes_row_and_reuses_it(tmp_path, capsys):
     again = tool.bench_run('toy', CONFIG, [], args, None, str(tmp_path), log)
     assert 'reusing' in capsys.readouterr().out
     assert again['metrics'] == row['metrics']
+    # --retest: no training, a second test of the same checkpoint (a new
+    # log folder) with the same metrics, GT voxel counts included.
+    tests = glob.glob(str(tmp_path / 'runs' / 'toy' / 'test' / '*' / '*.json'))
+    args.retest = True
+    retested = tool.bench_run('toy', CONFIG, [], args, None, str(tmp_path),
+                              log)
+    out = capsys.readouterr().out
+    assert 'reusing' not in out and '--train-one' not in out
+    assert len(glob.glob(
+        str(tmp_path / 'runs' / 'toy' / 'test' / '*' / '*.json'))) == len(
+            tests) + 1
+    assert {k: v for k, v in retested['metrics'].items()
+            if k.startswith('occ/')} == {
+                k: v for k, v in row['metrics'].items()
+                if k.startswith('occ/')}
+    assert any(k.startswith('occ/gt_voxels/') for k in row['metrics'])
+    assert retested['iterations'] == 4
+    args.retest = False
     args.iters = 8
     with pytest.raises(SystemExit, match='other settings'):
         tool.bench_run('toy', CONFIG, [], args, None, str(tmp_path), log)
