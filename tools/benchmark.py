@@ -16,6 +16,9 @@ matmuls, convolutions, attention; custom sparse/scatter operators count
 zero) and the share of the machine's fp32 matmul rate that it achieves
 (GFLOP / median wall time / the rate of a ``--matmul-size`` cube
 ``torch.mm`` measured in the same process at the same thread count).
+``--keep-freed-memory`` times with glibc keeping freed memory for reuse
+(as ``CPUMallocTuningHook`` does for CPU training) instead of faulting
+large activations in anew on every call.
 ``--fuse-conv-bn`` (and ``--channels-last``) time the deploy-time model
 whose image backbones' BatchNorms are folded into their convolutions
 (:mod:`projects.occ_common.models.deploy`). ``--train`` times one training
@@ -65,6 +68,9 @@ from projects.occ_common.utils.benchmarking import (PeakMemory,
                                                     alternating_runs,
                                                     count_gflop, matmul_gflops,
                                                     matmul_share, summarise)
+from projects.occ_common.utils.glibc_malloc import (MMAP_THRESHOLD,
+                                                    TRIM_THRESHOLD,
+                                                    tune_glibc_malloc)
 
 #: Points of one nuScenes LiDAR sweep (32 beams, 20 Hz), on average.
 NUSCENES_SWEEP_POINTS = 34720
@@ -101,6 +107,12 @@ def parse_args(argv=None):
         f'{NUSCENES_SWEEP_POINTS} points per merged sweep of the config)')
     parser.add_argument(
         '--threads', type=int, help='torch CPU threads (default: torch\'s)')
+    parser.add_argument(
+        '--keep-freed-memory',
+        action='store_true',
+        help='glibc keeps freed memory for reuse instead of returning it to '
+        'the kernel and faulting it in again (what CPUMallocTuningHook does '
+        'for CPU training; projects/occ_common/utils/glibc_malloc.py)')
     parser.add_argument(
         '--fuse-conv-bn',
         action='store_true',
@@ -594,7 +606,8 @@ def format_table(report: Dict) -> str:
         runs = len(r['latency_ms']['runs'])
         text.append(f'{osp.basename(r["config"])}: {r["input"]}, batch '
                     f'{r["batch_size"]}, {report["device"]}, '
-                    f'{report["threads"]} threads, {runs} runs after '
+                    f'{report["threads"]} threads, malloc '
+                    f'{report.get("malloc", "default")}, {runs} runs after '
                     f'{report["warmup"]} warm-up' +
                     (', alternating rounds' if len(models) > 1 else ''))
     if report.get('matmul_gflops'):
@@ -609,6 +622,10 @@ def main(argv=None) -> Dict:
     args = parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)
+    malloc = 'default'
+    if args.keep_freed_memory:
+        malloc = ('keeps freed memory' if tune_glibc_malloc(
+            MMAP_THRESHOLD, TRIM_THRESHOLD) else 'unchanged (not glibc)')
     subjects = [Subject(args.config, args.checkpoint, args)]
     if args.compare:
         subjects.append(
@@ -618,6 +635,7 @@ def main(argv=None) -> Dict:
     report = dict(
         device=args.device,
         threads=torch.get_num_threads(),
+        malloc=malloc,
         warmup=args.warmup,
         torch=torch.__version__,
         matmul_size=args.matmul_size,

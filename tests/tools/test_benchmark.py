@@ -45,6 +45,32 @@ def test_single_model_json(tmp_path, capsys):
         model['gflop'] / (latency['median'] / 1000) / report['matmul_gflops'])
     table = capsys.readouterr().out
     assert 'latency median (ms)' in table and 'ratio' not in table
+    assert report['malloc'] == 'default' and 'malloc default' in table
+
+
+def test_keep_freed_memory_tunes_glibc_before_the_models(monkeypatch,
+                                                         capsys):
+    """--keep-freed-memory sets the glibc thresholds (1 GiB, 2**31 - 1)
+    before any model is built, and the table says so. The call is recorded
+    instead of made: the test process's own allocator stays as it is."""
+    tool = _tool()
+    calls = []
+
+    def tune(mmap_threshold, trim_threshold):
+        calls.append((mmap_threshold, trim_threshold))
+        return True
+
+    built = []
+    subject = tool.Subject
+    monkeypatch.setattr(tool, 'tune_glibc_malloc', tune)
+    monkeypatch.setattr(
+        tool, 'Subject',
+        lambda *a: built.append(len(calls)) or subject(*a))
+    report = tool.main([CONFIG, '--runs', '1', '--warmup', '0', '--device',
+                        'cpu', '--matmul-size', '0', '--keep-freed-memory'])
+    assert calls == [(1 << 30, 2**31 - 1)] and built == [1]
+    assert report['malloc'] == 'keeps freed memory'
+    assert 'malloc keeps freed memory' in capsys.readouterr().out
 
 
 def test_compare_identical_models(tmp_path, capsys):

@@ -16,71 +16,11 @@ A GPU run allocates its activations on the device, where PyTorch's caching
 allocator already reuses memory, so the paper configs do not use this hook;
 the CPU runtime (``configs/_base_/cpu_smoke_runtime.py``) does.
 """
-import ctypes
-import ctypes.util
-from typing import Optional
-
 from mmdet3d.registry import HOOKS
 from mmengine.hooks import Hook
 
-#: ``mallopt`` parameters (glibc's malloc.h).
-M_TRIM_THRESHOLD = -1
-M_MMAP_THRESHOLD = -3
-#: ``mallopt`` takes an ``int``.
-_INT_MAX = 2**31 - 1
-
-
-def _glibc() -> Optional[ctypes.CDLL]:
-    """The C library if it is glibc (the one with ``mallopt``), else None."""
-    name = ctypes.util.find_library('c')
-    if name is None:
-        return None
-    try:
-        libc = ctypes.CDLL(name)
-    except OSError:
-        return None
-    if not hasattr(libc, 'mallopt') or not hasattr(libc,
-                                                   'gnu_get_libc_version'):
-        return None
-    return libc
-
-
-def _checked(name: str, value: int) -> int:
-    """``value`` as an int, refused unless ``mallopt`` can take it."""
-    value = int(value)
-    if not 0 <= value <= _INT_MAX:
-        raise ValueError(f'{name} must be in [0, {_INT_MAX}] bytes (mallopt '
-                         f'takes an int), got {value}')
-    return value
-
-
-def tune_glibc_malloc(mmap_threshold: int, trim_threshold: int) -> bool:
-    """Set glibc's mmap and trim thresholds for this process.
-
-    Allocations below ``mmap_threshold`` bytes come from the heap, and
-    freed heap memory is returned to the kernel only beyond
-    ``trim_threshold`` bytes at its top: both fixed, which also turns off
-    glibc's dynamic threshold.
-
-    Args:
-        mmap_threshold (int): Bytes, at most 2**31 - 1.
-        trim_threshold (int): Bytes, at most 2**31 - 1.
-
-    Returns:
-        bool: Whether glibc took both settings (False on another C library,
-        e.g. macOS or musl, where nothing is changed).
-
-    Raises:
-        ValueError: If a threshold is not in [0, 2**31 - 1].
-    """
-    mmap_threshold = _checked('mmap_threshold', mmap_threshold)
-    trim_threshold = _checked('trim_threshold', trim_threshold)
-    libc = _glibc()
-    if libc is None:
-        return False
-    ok_mmap = libc.mallopt(M_MMAP_THRESHOLD, ctypes.c_int(mmap_threshold))
-    ok_trim = libc.mallopt(M_TRIM_THRESHOLD, ctypes.c_int(trim_threshold))
-    return bool(ok_mmap) and bool(ok_trim)
+from ..utils.glibc_malloc import (MMAP_THRESHOLD, TRIM_THRESHOLD,
+                                  checked_threshold, tune_glibc_malloc)
 
 
 @HOOKS.register_module()
@@ -101,10 +41,12 @@ class CPUMallocTuningHook(Hook):
     priority = 'VERY_HIGH'
 
     def __init__(self,
-                 mmap_threshold: int = 1 << 30,
-                 trim_threshold: int = _INT_MAX):
-        self.mmap_threshold = _checked('mmap_threshold', mmap_threshold)
-        self.trim_threshold = _checked('trim_threshold', trim_threshold)
+                 mmap_threshold: int = MMAP_THRESHOLD,
+                 trim_threshold: int = TRIM_THRESHOLD):
+        self.mmap_threshold = checked_threshold('mmap_threshold',
+                                                mmap_threshold)
+        self.trim_threshold = checked_threshold('trim_threshold',
+                                                trim_threshold)
 
     def before_run(self, runner) -> None:
         """Set the thresholds and log the outcome."""
