@@ -3,10 +3,14 @@ import math
 
 import pytest
 import torch
+import torch.nn.functional as F
 
+from projects.occ_common.models.layers import cartesian_to_cylindrical
 from projects.occ_common.testing.autograd_memory import saved_tensor_bytes
 from projects.occ_cyl import CylinderGrid, CylindricalOccHead
-from projects.occ_cyl.cylindrical_occ_head import sample_plane, voxel_centres
+from projects.occ_cyl.cylindrical_occ_head import (axis_lerp,
+                                                   sample_tpv_planes,
+                                                   voxel_centres)
 
 PI = math.pi
 PC_RANGE = (-4.0, -4.0, -1.0, 4.0, 4.0, 1.0)
@@ -28,21 +32,94 @@ def _head(**kwargs):
     return CylindricalOccHead(**cfg)
 
 
-def test_sample_plane_wraps_the_azimuth():
-    """Row values (10, 1, 2, 3) along a periodic width of 4 cells: at w = 1
-    (theta = pi) the sample sits half-way between cell 3 and cell 0 ->
-    (3 + 10) / 2 = 6.5, likewise at w = -1; at w = 0 (pixel 1.5) it is
-    (1 + 2) / 2 = 1.5. Without wrapping the edge value repeats: 3 and 10."""
-    plane = torch.tensor([10.0, 1.0, 2.0, 3.0]).view(1, 1, 1, 4)
-    coords = torch.tensor([[0.0, 1.0], [0.0, -1.0], [0.0, 0.0]])
-    wrapped = sample_plane(plane, coords, False, True)
-    torch.testing.assert_close(wrapped, torch.tensor([[[6.5, 6.5, 1.5]]]))
-    flat = sample_plane(plane, coords, False, False)
-    torch.testing.assert_close(flat, torch.tensor([[[3.0, 10.0, 1.5]]]))
-    # The same along a periodic height.
-    column = plane.view(1, 1, 4, 1)
-    wrapped_h = sample_plane(column, coords[:, [1, 0]], True, False)
-    torch.testing.assert_close(wrapped_h, wrapped)
+def grid_sample_plane(plane, coords, wrap_h, wrap_w):
+    """Reference: ``grid_sample`` (bilinear, border padding) of a plane
+    (B, C, H, W) at normalised ``(h, w)`` coords (P, 2) -> (B, C, P); a
+    wrapped axis is padded circularly by one cell first (the head's
+    sampling before it became separable)."""
+    h_coord, w_coord = coords.to(plane.dtype).unbind(-1)
+    if wrap_h:
+        size = plane.shape[2]
+        plane = torch.cat([plane[:, :, -1:], plane, plane[:, :, :1]], dim=2)
+        h_coord = ((h_coord + 1) * size + 2) / (size + 2) - 1
+    if wrap_w:
+        size = plane.shape[3]
+        plane = torch.cat([plane[..., -1:], plane, plane[..., :1]], dim=3)
+        w_coord = ((w_coord + 1) * size + 2) / (size + 2) - 1
+    grid = torch.stack([w_coord, h_coord], dim=-1).view(1, 1, -1, 2)
+    return F.grid_sample(plane, grid.expand(plane.shape[0], -1, -1, -1),
+                         mode='bilinear', padding_mode='border',
+                         align_corners=False)[:, :, 0]
+
+
+def reference_tpv_samples(planes, cylinder, pc_range, shape):
+    """Eq. 17 voxel by voxel: the three planes sampled by grid_sample at
+    every voxel centre and summed. Shape (B, X * Y * Z, C)."""
+    cyl = cylinder.normalize(
+        cartesian_to_cylindrical(voxel_centres(pc_range, shape)))
+    wrap = cylinder.full_circle
+    feats = 0
+    for plane, (ax_h, ax_w) in zip(planes, ((0, 1), (1, 2), (0, 2))):
+        feats = feats + grid_sample_plane(plane, cyl[:, [ax_h, ax_w]],
+                                          wrap and ax_h == 1,
+                                          wrap and ax_w == 1)
+    return feats.transpose(1, 2)
+
+
+def test_axis_lerp_wraps_the_azimuth():
+    """Row values (10, 1, 2, 3) along a periodic axis of 4 cells: at
+    coord 1 (theta = pi, position t = (2 * 4 - 1) / 2 = 3.5) the sample
+    sits half-way between cell 3 and cell 0 -> (3 + 10) / 2 = 6.5, at
+    coord -1 (t = -0.5) between cells 3 and 0 too; at 0 (t = 1.5) it is
+    (1 + 2) / 2 = 1.5. Without wrapping t is clamped to [0, 3]: 3 and 10.
+    """
+    row = torch.tensor([10.0, 1.0, 2.0, 3.0])
+    coords = torch.tensor([1.0, -1.0, 0.0])
+
+    def lerp(wrap):
+        low, up, frac = axis_lerp(coords, 4, wrap)
+        return torch.lerp(row[low], row[up], frac)
+
+    torch.testing.assert_close(lerp(True), torch.tensor([6.5, 6.5, 1.5]))
+    torch.testing.assert_close(lerp(False), torch.tensor([3.0, 10.0, 1.5]))
+    # The reference pads circularly and agrees.
+    torch.testing.assert_close(
+        grid_sample_plane(row.view(1, 1, 1, 4),
+                          torch.stack([torch.zeros(3), coords], 1), False,
+                          True), torch.tensor([[[6.5, 6.5, 1.5]]]))
+
+
+@pytest.mark.parametrize('cylinder', [
+    CYLINDER,
+    CylinderGrid.for_box(PC_RANGE, (4, 8, 2), 'inscribed', True),
+    CylinderGrid((3, 5, 3), (0.0, -PI / 2, -1.5, 6.0, PI / 2, 1.2)),
+], ids=['covering', 'clamping', 'half-circle'])
+def test_separable_samples_equal_grid_sample_per_voxel(cylinder):
+    """The separable sampling gives grid_sample's values at every voxel
+    centre, and the same gradients to the three planes, in float64 (to
+    1e-12), for two samples of a batch, odd plane sizes, a clamping
+    cylinder (voxels beyond its radius take the border) and a half circle
+    (no wrap: the azimuth clamps too)."""
+    gen = torch.Generator().manual_seed(1)
+    shape = (6, 4, 3)
+    r, t, z = 5, 7, 4
+    planes = [
+        torch.randn(2, 3, *hw, generator=gen, dtype=torch.float64,
+                    requires_grad=True)
+        for hw in ((r, t), (t, z), (r, z))
+    ]
+    cyl = cylinder.normalize(
+        cartesian_to_cylindrical(voxel_centres(PC_RANGE, shape)))
+    cyl = cyl.view(shape[0] * shape[1], shape[2], 3)
+    got = sample_tpv_planes(planes, cyl[:, 0, :2], cyl[0, :, 2],
+                            cylinder.full_circle)
+    expected = reference_tpv_samples(planes, cylinder, PC_RANGE, shape)
+    assert got.shape == (2, 6 * 4 * 3, 3)
+    torch.testing.assert_close(got, expected, rtol=1e-12, atol=1e-12)
+    grad = torch.randn(got.shape, generator=gen, dtype=torch.float64)
+    for a, b in zip(torch.autograd.grad(got, planes, grad),
+                    torch.autograd.grad(expected, planes, grad)):
+        torch.testing.assert_close(a, b, rtol=1e-12, atol=1e-12)
 
 
 def test_scale_shapes_and_loss_labels_come_from_the_head():
@@ -127,8 +204,8 @@ def test_clamping_cylinder_samples_the_border_ring_beyond_its_radius():
     head = _head(cylinder=clamped, in_channels=1)
     ring = torch.arange(4.0).view(1, 1, 4, 1).expand(1, 1, 4, 8)
     planes = (ring, torch.zeros(1, 1, 8, 2), torch.zeros(1, 1, 4, 2))
-    centres = head.centres_0
-    sampled = sample_plane(planes[0], centres[:, [0, 1]], False, True)
+    sampled = sample_tpv_planes(planes, head.columns_0, head.heights_0,
+                                True).permute(0, 2, 1)
     xyz = voxel_centres(PC_RANGE, (4, 4, 2))
     r = xyz[:, :2].norm(dim=1)
     corner = (r > 4).nonzero()[0, 0]
