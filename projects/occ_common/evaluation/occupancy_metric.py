@@ -347,8 +347,10 @@ class OccupancyMetric(BaseMetric):
             for name, iou in zip(self.class_names, per_class_iou(total))
         })
         if self.class_voxel_counts:
+            # Floats: mmengine's message hub turns an int into numpy's
+            # int64, which its json log drops (written as null).
             metrics.update({
-                f'gt_voxels/{name}': int(count)
+                f'gt_voxels/{name}': float(count)
                 for name, count in zip(self.class_names, total.sum(1))
             })
         for subset in self.subsets:
