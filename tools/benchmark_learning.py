@@ -527,7 +527,8 @@ def _weak_large_classes(row: dict) -> str:
     """Classes with >= LARGE_CLASS_VOXELS GT voxels at IoU <=
     LARGE_CLASS_MIN_IOU ('none' when every large class is above it)."""
     metrics = row['metrics']
-    if not any(k.startswith('occ/gt_voxels/') for k in metrics):
+    if not any(k.startswith('occ/gt_voxels/') and v is not None
+               for k, v in metrics.items()):
         return 'n/a'
     weak = [name for name in large_classes(metrics)
             if not metrics.get(f'occ/{name}', 0.0) > LARGE_CLASS_MIN_IOU]

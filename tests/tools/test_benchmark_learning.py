@@ -213,6 +213,12 @@ def test_class_lines_show_gt_voxels_and_weak_large_classes():
     assert tool_runs.large_classes(metrics) == ['bus']
     row['metrics'] = {'occ/mIoU': 1.0}
     assert _tool()._weak_large_classes(row) == 'n/a'
+    # A result logged while the counts were ints holds them as null: no
+    # counts, and the table of such a row still renders.
+    row['metrics'] = {'occ/mIoU': 1.0, 'occ/car': 5.0,
+                      'occ/gt_voxels/car': None}
+    assert _tool()._weak_large_classes(row) == 'n/a'
+    assert '| car | 5.00 |' in tool_runs.format_table([row]).splitlines()
 
 
 _CAMERA_OFF = dict(variant='camera', lidar_encoder=None, fusion=None,

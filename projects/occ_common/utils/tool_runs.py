@@ -174,12 +174,14 @@ LARGE_CLASS_MIN_IOU = 10.0
 def large_classes(metrics: Dict[str, float],
                   min_voxels: int = LARGE_CLASS_VOXELS) -> List[str]:
     """Classes with at least ``min_voxels`` GT voxels in ``metrics``
-    (none when the metric logged no counts), without the empty class of
-    either convention (SurroundOcc's ``empty``, Occ3D's ``free``): that
-    one is the ``IoU`` line's business."""
+    (none when the metric logged no counts; a count of None, as results
+    logged before the counts were floats hold, is no count), without the
+    empty class of either convention (SurroundOcc's ``empty``, Occ3D's
+    ``free``): that one is the ``IoU`` line's business."""
     return [
         key[len(GT_VOXELS):] for key, count in metrics.items()
-        if key.startswith(GT_VOXELS) and count >= min_voxels
+        if key.startswith(GT_VOXELS) and count is not None
+        and count >= min_voxels
         and key[len(GT_VOXELS):] not in ('empty', 'free')
     ]
 
