@@ -14,8 +14,9 @@ order, so load drifts hit both alike) and adds the ratio second / first.
 Beside latency: the GFLOP of one prediction (``torch.utils.flop_counter``:
 matmuls, convolutions, attention; custom sparse/scatter operators count
 zero) and the share of the machine's fp32 matmul rate that it achieves
-(GFLOP / median wall time / the rate of a ``--matmul-size`` cube
-``torch.mm`` measured in the same process at the same thread count).
+(GFLOP / median wall time / the median rate of a ``--matmul-size`` cube
+``torch.mm`` timed in the same rounds as the models, so under the same
+load and at the same thread count).
 ``--keep-freed-memory`` times with glibc keeping freed memory for reuse
 (as ``CPUMallocTuningHook`` does for CPU training) instead of faulting
 large activations in anew on every call.
@@ -66,7 +67,7 @@ from mmengine.config import Config, DictAction
 
 from projects.occ_common.utils.benchmarking import (PeakMemory,
                                                     alternating_runs,
-                                                    count_gflop, matmul_gflops,
+                                                    count_gflop, matmul_call,
                                                     matmul_share, summarise)
 from projects.occ_common.utils.glibc_malloc import (MMAP_THRESHOLD,
                                                     TRIM_THRESHOLD,
@@ -512,32 +513,44 @@ class Subject:
         return len(self.batch['data_samples'])
 
 
-def benchmark_models(subjects: List[Subject], args,
-                     rate: Optional[float]) -> List[Dict]:
+def benchmark_models(subjects: List[Subject],
+                     args) -> Tuple[List[Dict], Optional[Dict]]:
     """Static figures of each model, then latency in alternating rounds.
+
+    With ``args.matmul_size`` a fp32 ``torch.mm`` runs in every round too,
+    so that the matmul rate the shares refer to is measured under the
+    same load as the models (on a shared machine a rate measured once,
+    before the models, moved by 1.5x within minutes: issue 18).
 
     Args:
         subjects (list[Subject]): One or two models.
-        args (argparse.Namespace): ``runs``, ``warmup``, ``device``.
-        rate (float, optional): The matmul rate (GFLOP/s) for the share.
+        args (argparse.Namespace): ``runs``, ``warmup``, ``device``,
+            ``matmul_size`` (0: no matmul reference).
 
     Returns:
-        list[dict]: One result per model.
+        tuple: One result per model, and the matmul rate (GFLOP/s) of the
+        rounds as :func:`summarise` gives it (None without a reference).
     """
     results = [subject.static_report() for subject in subjects]
     names = [str(i) for i in range(len(subjects))]
+    calls = {n: s.predict for n, s in zip(names, subjects)}
+    if args.matmul_size:
+        calls['matmul'], mm_gflop = matmul_call(args.matmul_size,
+                                                device=args.device)
     times = alternating_runs(
-        {n: s.predict for n, s in zip(names, subjects)},
-        rounds=args.runs, warmup=args.warmup, device=args.device,
+        calls, rounds=args.runs, warmup=args.warmup, device=args.device,
         before={n: s.fresh_input for n, s in zip(names, subjects)})
+    rate = (summarise([mm_gflop / t for t in times['matmul']['wall_s']])
+            if args.matmul_size else None)
     for name, result in zip(names, results):
         wall = [t * 1000 for t in times[name]['wall_s']]
         result['latency_ms'] = summarise(wall)
         result['cpu_ms'] = summarise([t * 1000
                                       for t in times[name]['cpu_s']])
         result['matmul_share'] = (None if rate is None else matmul_share(
-            result['gflop'], result['latency_ms']['median'] / 1000, rate))
-    return results
+            result['gflop'], result['latency_ms']['median'] / 1000,
+            rate['median']))
+    return results, rate
 
 
 def ratios(first: Dict, second: Dict) -> Dict[str, Optional[float]]:
@@ -611,9 +624,13 @@ def format_table(report: Dict) -> str:
                     f'{report["warmup"]} warm-up' +
                     (', alternating rounds' if len(models) > 1 else ''))
     if report.get('matmul_gflops'):
+        rounds = report.get('matmul_gflops_rounds') or {}
+        spread = (f' (min-max {rounds["min"]:.1f}-{rounds["max"]:.1f})'
+                  if rounds else '')
         text.append(f'matmul rate (fp32 {report["matmul_size"]}^3 torch.mm, '
-                    f'same process and threads): '
-                    f'{report["matmul_gflops"]:.1f} GFLOP/s')
+                    f'same process and threads, median of the rounds it '
+                    f'alternated with the models): '
+                    f'{report["matmul_gflops"]:.1f}{spread} GFLOP/s')
     return '\n'.join(text)
 
 
@@ -630,8 +647,7 @@ def main(argv=None) -> Dict:
     if args.compare:
         subjects.append(
             Subject(args.compare[0], (args.compare[1:] or [None])[0], args))
-    rate = (matmul_gflops(args.matmul_size, device=args.device)
-            if args.matmul_size else None)
+    models, rate = benchmark_models(subjects, args)
     report = dict(
         device=args.device,
         threads=torch.get_num_threads(),
@@ -639,8 +655,9 @@ def main(argv=None) -> Dict:
         warmup=args.warmup,
         torch=torch.__version__,
         matmul_size=args.matmul_size,
-        matmul_gflops=rate,
-        models=benchmark_models(subjects, args, rate))
+        matmul_gflops=None if rate is None else rate['median'],
+        matmul_gflops_rounds=rate,
+        models=models)
     if args.compare:
         report['ratio'] = ratios(*report['models'])
     print(format_table(report))

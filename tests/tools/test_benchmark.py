@@ -43,6 +43,11 @@ def test_single_model_json(tmp_path, capsys):
     assert len(model['cpu_ms']['runs']) == 4
     assert model['matmul_share'] == pytest.approx(
         model['gflop'] / (latency['median'] / 1000) / report['matmul_gflops'])
+    # The reference rate is timed in each of the 4 rounds beside the model
+    # (not once before it), and the share uses the median of those rounds.
+    rounds = report['matmul_gflops_rounds']
+    assert len(rounds['runs']) == 4
+    assert report['matmul_gflops'] == pytest.approx(np.median(rounds['runs']))
     table = capsys.readouterr().out
     assert 'latency median (ms)' in table and 'ratio' not in table
     assert report['malloc'] == 'default' and 'malloc default' in table

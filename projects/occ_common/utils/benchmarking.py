@@ -13,7 +13,7 @@ import gc
 import statistics
 import threading
 import time
-from typing import Callable, Dict, List, Optional
+from typing import Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 import torch
@@ -234,11 +234,34 @@ def count_gflop(run: Callable[[], object]) -> float:
     return counter.get_total_flops() / 1e9
 
 
+def matmul_call(size: int = 2048,
+                device='cpu') -> Tuple[Callable[[], object], float]:
+    """One fp32 ``size``-cube ``torch.mm`` on fixed matrices, and its work.
+
+    Timed as one more subject of :func:`alternating_runs`, beside the
+    models, its rate in each round is the reference the models' rates are
+    a share of, measured under the same load as they are.
+
+    Args:
+        size (int): Side of the square matrices (2 size^3 FLOP per
+            product). Defaults to 2048.
+        device (torch.device | str): Defaults to 'cpu'.
+
+    Returns:
+        tuple: The call, and its GFLOP.
+    """
+    gen = torch.Generator().manual_seed(0)
+    a = torch.randn(size, size, generator=gen).to(device)
+    b = torch.randn(size, size, generator=gen).to(device)
+    return (lambda: torch.mm(a, b)), 2.0 * size**3 / 1e9
+
+
 def matmul_gflops(size: int = 2048, repeats: int = 3, device='cpu') -> float:
     """The machine's fp32 matmul rate: best of ``repeats`` ``torch.mm``.
 
     The reference a model's achieved rate is a share of; measure it in the
-    same process, at the same thread count, as the model.
+    same process, at the same thread count, as the model (on a shared
+    machine rather in the model's alternating rounds: :func:`matmul_call`).
 
     Args:
         size (int): Side of the square matrices (2 size^3 FLOP per
@@ -249,12 +272,9 @@ def matmul_gflops(size: int = 2048, repeats: int = 3, device='cpu') -> float:
     Returns:
         float: GFLOP per second.
     """
-    gen = torch.Generator().manual_seed(0)
-    a = torch.randn(size, size, generator=gen).to(device)
-    b = torch.randn(size, size, generator=gen).to(device)
-    times = timed_runs(lambda: torch.mm(a, b), repeats, warmup=1,
-                       device=device)['wall_s']
-    return 2.0 * size**3 / min(times) / 1e9
+    call, gflop = matmul_call(size, device)
+    times = timed_runs(call, repeats, warmup=1, device=device)['wall_s']
+    return gflop / min(times)
 
 
 def matmul_share(gflop: float, seconds: float, rate_gflops: float) -> float:

@@ -4,7 +4,8 @@ import torch
 
 from projects.occ_common.utils.benchmarking import (PeakMemory,
                                                     alternating_runs,
-                                                    count_gflop, matmul_gflops,
+                                                    count_gflop, matmul_call,
+                                                    matmul_gflops,
                                                     matmul_share, summarise,
                                                     timed_runs)
 
@@ -69,6 +70,11 @@ def test_matmul_rate_and_share():
     """The measured rate is positive; 60 GFLOP in 1 s against 150 GFLOP/s
     is a share of 0.4; a zero time is refused by value."""
     assert matmul_gflops(size=64, repeats=2) > 0
+    # The call of the alternating rounds: a 64^3 product is 2 * 64^3 =
+    # 524,288 FLOP, and it is the product of two fixed matrices.
+    call, gflop = matmul_call(size=64)
+    assert gflop * 1e9 == pytest.approx(524288)
+    assert torch.equal(call(), call()) and call().shape == (64, 64)
     assert matmul_share(60.0, 1.0, 150.0) == pytest.approx(0.4)
     with pytest.raises(ValueError, match='positive time'):
         matmul_share(1.0, 0.0, 150.0)
