@@ -218,7 +218,7 @@ def count_gflop(run: Callable[[], object]) -> float:
     attention: 2 FLOP per multiply-add); element-wise work and custom
     operators (spconv's sparse convolutions, mmcv's scatter) count zero, so
     this is the model's dense-algebra work, the part the matmul rate of
-    :func:`matmul_gflops` is the ceiling for.
+    :func:`matmul_call`'s rate is the ceiling for.
 
     Args:
         run (Callable[[], object]): The call (run once, under no_grad if
@@ -256,34 +256,13 @@ def matmul_call(size: int = 2048,
     return (lambda: torch.mm(a, b)), 2.0 * size**3 / 1e9
 
 
-def matmul_gflops(size: int = 2048, repeats: int = 3, device='cpu') -> float:
-    """The machine's fp32 matmul rate: best of ``repeats`` ``torch.mm``.
-
-    The reference a model's achieved rate is a share of; measure it in the
-    same process, at the same thread count, as the model (on a shared
-    machine rather in the model's alternating rounds: :func:`matmul_call`).
-
-    Args:
-        size (int): Side of the square matrices (2 size^3 FLOP per
-            product). Defaults to 2048.
-        repeats (int): Timed products; the fastest counts. Defaults to 3.
-        device (torch.device | str): Defaults to 'cpu'.
-
-    Returns:
-        float: GFLOP per second.
-    """
-    call, gflop = matmul_call(size, device)
-    times = timed_runs(call, repeats, warmup=1, device=device)['wall_s']
-    return gflop / min(times)
-
-
 def matmul_share(gflop: float, seconds: float, rate_gflops: float) -> float:
     """The share of the matmul rate a run achieved: (GFLOP / s) / rate.
 
     Args:
         gflop (float): Work of the run (:func:`count_gflop`).
         seconds (float): Its wall time.
-        rate_gflops (float): :func:`matmul_gflops`.
+        rate_gflops (float): The matmul rate (:func:`matmul_call`).
 
     Returns:
         float: E.g. 0.4 for 60 GFLOP in 1 s against 150 GFLOP/s.

@@ -5,7 +5,6 @@ import torch
 from projects.occ_common.utils.benchmarking import (PeakMemory,
                                                     alternating_runs,
                                                     count_gflop, matmul_call,
-                                                    matmul_gflops,
                                                     matmul_share, summarise,
                                                     timed_runs)
 
@@ -67,9 +66,8 @@ def test_count_gflop_of_a_linear_layer():
 
 
 def test_matmul_rate_and_share():
-    """The measured rate is positive; 60 GFLOP in 1 s against 150 GFLOP/s
-    is a share of 0.4; a zero time is refused by value."""
-    assert matmul_gflops(size=64, repeats=2) > 0
+    """60 GFLOP in 1 s against 150 GFLOP/s is a share of 0.4; a zero time
+    is refused by value."""
     # The call of the alternating rounds: a 64^3 product is 2 * 64^3 =
     # 524,288 FLOP, and it is the product of two fixed matrices.
     call, gflop = matmul_call(size=64)
