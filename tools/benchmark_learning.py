@@ -40,7 +40,8 @@ from projects.occ_common.utils.tool_runs import (LARGE_CLASS_MIN_IOU,
                                                  data_options, format_table,
                                                  large_classes, last_metrics,
                                                  pct, prepare_world,
-                                                 read_json_lines, run, tool)
+                                                 read_json_lines, run,
+                                                 stretched_times, tool)
 
 #: The camera-only LSS baseline of SDG-OCC's Table 3 as --cfg-options of
 #: an SDG-Fusion config (the deltas of configs/sdg_occ/ablations/
@@ -149,19 +150,6 @@ def parse_args(argv=None):
 # ----------------------------------------------------------------------
 # The child process: one training run through tools/train.py's machinery.
 # ----------------------------------------------------------------------
-def _scaled(value, factor: float):
-    """``value`` (a number or a list of numbers) times ``factor``, rounded
-    to whole iterations."""
-    if isinstance(value, (list, tuple)):
-        return [int(round(v * factor)) for v in value]
-    return int(round(value * factor))
-
-
-#: Scheduler arguments that are positions or lengths in time.
-_TIME_KEYS = ('begin', 'end', 'T_max', 'milestones', 'step_size',
-              'total_steps')
-
-
 def set_iteration_budget(cfg, max_iters: Optional[int], val_interval: int,
                          epoch_length: int, log_interval: int) -> int:
     """Make ``cfg`` train ``max_iters`` iterations, validating every
@@ -200,9 +188,7 @@ def set_iteration_budget(cfg, max_iters: Optional[int], val_interval: int,
     for scheduler in schedulers:
         scheduler = copy.deepcopy(dict(scheduler))
         unit = epoch_length if scheduler.get('by_epoch', True) else 1
-        for key in _TIME_KEYS:
-            if key in scheduler:
-                scheduler[key] = _scaled(scheduler[key], unit * factor)
+        scheduler.update(stretched_times(scheduler, unit * factor))
         scheduler['by_epoch'] = False
         scheduler.pop('convert_to_iter_based', None)
         converted.append(scheduler)

@@ -25,7 +25,8 @@ from typing import Optional, Tuple
 from projects.occ_common.utils.tool_runs import (LARGE_CLASS_VOXELS,
                                                  data_options, format_table,
                                                  large_classes, last_metrics,
-                                                 pct, prepare_world, run, tool)
+                                                 pct, prepare_world, run,
+                                                 stretched_times, tool)
 
 #: (name, config, label convention). The small configs of the learning
 #: benchmark (issue 14) on their own schedules, which fit the demo's
@@ -56,7 +57,7 @@ def parse_args(argv=None):
         type=int,
         default=None,
         help='train every model this many epochs (default: its config\'s '
-        'schedule, whose epoch-based LR decay is stretched to fit)')
+        'own); the LR warm-up and decay are stretched to fit')
     parser.add_argument(
         '--models',
         nargs='+',
@@ -96,11 +97,11 @@ def schedule_options(config: str, epochs: Optional[int]) -> Tuple[int, list]:
 
     Returns:
         tuple[int, list[str]]: The epochs, and overrides that set them,
-        validate and checkpoint once at the end, and move the end (and a
-        cosine's ``T_max``) of every epoch-based LR scheduler that ends with
-        the config's schedule to the new last epoch, so that a longer run
-        does not train its last epochs at the decayed rate and a shorter
-        one still decays.
+        validate and checkpoint once at the end, and stretch every LR
+        scheduler's times (warm-up, decay) by epochs / the config's epochs
+        as the learning benchmark does, so that a shorter run still warms
+        up and decays, and a longer one does not train its last epochs at
+        the decayed rate.
     """
     from mmengine.config import Config
     cfg = Config.fromfile(config, import_custom_modules=False)
@@ -111,10 +112,9 @@ def schedule_options(config: str, epochs: Optional[int]) -> Tuple[int, list]:
         f'default_hooks.checkpoint.interval={epochs}'
     ]
     for i, scheduler in enumerate(cfg.get('param_scheduler') or []):
-        if scheduler.get('by_epoch', True) and scheduler.get('end') == own:
-            options.append(f'param_scheduler.{i}.end={epochs}')
-            if scheduler.get('T_max') == own:
-                options.append(f'param_scheduler.{i}.T_max={epochs}')
+        for key, value in stretched_times(scheduler, epochs / own).items():
+            value = str(value).replace(' ', '')  # one shell word a list
+            options.append(f'param_scheduler.{i}.{key}={value}')
     return epochs, options
 
 

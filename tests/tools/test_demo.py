@@ -24,29 +24,50 @@ def test_unlearned_large_classes_needs_a_gain_of_five_points():
     assert demo.unlearned_large_classes(row) == 'none'
 
 
-def test_schedule_options_stretch_the_cosine_to_the_epochs():
-    """The small OccCylindrical config decays its LR by a cosine over its
-    12 epochs (scheduler 1) after a 50-iteration warm-up (scheduler 0,
-    iteration-based). Trained 3 epochs, the cosine must end at epoch 3
-    (not leave the run at a barely decayed rate); trained 30, at epoch 30
-    (not train 18 epochs at 0). Applied the way tools/train.py applies
-    --cfg-options, only the cosine's end and T_max and the loop change."""
+def test_schedule_options_stretch_the_schedule_to_the_epochs():
+    """The small OccCylindrical config warms up over 50 iterations
+    (scheduler 0) and decays its LR by a cosine over its 12 epochs
+    (scheduler 1). Trained 3 epochs (a quarter), the cosine must end at
+    epoch 3, not leave the run at a barely decayed rate, and the warm-up
+    take round(12.5) = 12 iterations; trained 30 (2.5x), the cosine ends at
+    epoch 30 (not 18 epochs at 0) and the warm-up takes 125. Applied the way
+    tools/train.py applies --cfg-options."""
     demo = load_tool('demo.py')
     config = ('configs/occ_cyl/'
               'occcyl_small_1xb1-12e_surroundocc-nus-synthetic.py')
     assert demo.schedule_options(config, None)[0] == 12
-    for epochs in (3, 30):
+    for epochs, warmup in ((3, 12), (30, 125)):
         got, options = demo.schedule_options(config, epochs)
         assert got == epochs
         parser = argparse.ArgumentParser()
         parser.add_argument('opts', nargs='*', action=DictAction)
         cfg = Config.fromfile(config, import_custom_modules=False)
-        before = cfg.param_scheduler[0].copy()
         cfg.merge_from_dict(parser.parse_args(options).opts)
-        cosine = cfg.param_scheduler[1]
-        assert (cosine.end, cosine.T_max) == (epochs, epochs)
+        linear, cosine = cfg.param_scheduler
+        assert (linear.type, linear.begin, linear.end) == ('LinearLR', 0,
+                                                           warmup)
+        assert linear.by_epoch is False
         assert cosine.type == 'CosineAnnealingLR'
-        assert cfg.param_scheduler[0] == before
+        assert (cosine.begin, cosine.end, cosine.T_max) == (0, epochs,
+                                                            epochs)
         assert cfg.train_cfg.max_epochs == epochs
         assert cfg.train_cfg.val_interval == epochs
         assert cfg.default_hooks.checkpoint.interval == epochs
+
+
+def test_schedule_options_scale_milestones():
+    """A list-valued time, the paper OccCylindrical's MultiStepLR milestones
+    [20, 23] of 24 epochs, travels as one shell word that mmengine reads
+    back as a list: at 12 epochs [10, 12] (23 * 0.5 = 11.5 rounds to 12)
+    and the 500-iteration warm-up 250."""
+    demo = load_tool('demo.py')
+    config = 'configs/occ_cyl/occcyl_r50-swins_3xb1-24e_surroundocc-nus.py'
+    _, options = demo.schedule_options(config, 12)
+    assert 'param_scheduler.1.milestones=[10,12]' in options
+    parser = argparse.ArgumentParser()
+    parser.add_argument('opts', nargs='*', action=DictAction)
+    cfg = Config.fromfile(config, import_custom_modules=False)
+    cfg.merge_from_dict(parser.parse_args(options).opts)
+    assert cfg.param_scheduler[1].milestones == [10, 12]
+    assert cfg.param_scheduler[1].end == 12
+    assert cfg.param_scheduler[0].end == 250

@@ -23,6 +23,37 @@ WORLD_META = osp.join('synthetic_gt', 'meta.json')
 INFO_PREFIX = 'nuscenes_occ'
 
 
+#: Scheduler arguments that are positions or lengths in time.
+SCHEDULE_TIME_KEYS = ('begin', 'end', 'T_max', 'milestones', 'step_size',
+                      'total_steps')
+
+
+def stretched_times(scheduler: dict, factor: float) -> dict:
+    """The time arguments of an LR scheduler config times ``factor``.
+
+    Args:
+        scheduler (dict): One ``param_scheduler`` entry.
+        factor (float): E.g. new length / planned length, times the
+            iterations of an epoch to rewrite an epoch-based one in
+            iterations.
+
+    Returns:
+        dict: Each of ``SCHEDULE_TIME_KEYS`` the scheduler has, scaled and
+        rounded to whole units (a list such as ``milestones`` element by
+        element).
+    """
+
+    def scaled(value):
+        if isinstance(value, (list, tuple)):
+            return [int(round(v * factor)) for v in value]
+        return int(round(value * factor))
+
+    return {
+        key: scaled(scheduler[key])
+        for key in SCHEDULE_TIME_KEYS if key in scheduler
+    }
+
+
 def tool(name: str) -> List[str]:
     """The command prefix of ``tools/<name>`` with this interpreter."""
     return [sys.executable, osp.join(ROOT, 'tools', name)]
