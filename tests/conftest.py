@@ -13,8 +13,8 @@ from projects.occ_common.testing.tool_logs import run_create_data
 def pytest_configure(config):
     """Under pytest-xdist (``make test`` runs ``-n 2``), give every worker
     and the tools it starts one thread. Two workers of two OpenMP threads
-    each on two cores wait for each other at every barrier: iterations ran
-    10-30x slower so on this project's 2-core CI machine."""
+    each on two cores wait for each other at every barrier: on this
+    project's 2-core CI machine torch iterations then ran 10-30x slower."""
     if os.environ.get('PYTEST_XDIST_WORKER'):
         os.environ['OMP_NUM_THREADS'] = '1'
         os.environ['MKL_NUM_THREADS'] = '1'

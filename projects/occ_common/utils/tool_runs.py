@@ -40,18 +40,24 @@ def stretched_times(scheduler: dict, factor: float) -> dict:
     Returns:
         dict: Each of ``SCHEDULE_TIME_KEYS`` the scheduler has, scaled and
         rounded to whole units (a list such as ``milestones`` element by
-        element).
+        element). A positive time stays at least 1 and ``end`` stays after
+        ``begin``: a 50-iteration warm-up squeezed into a short run keeps
+        one iteration instead of becoming a scheduler mmengine refuses
+        (``end <= begin``).
     """
 
     def scaled(value):
         if isinstance(value, (list, tuple)):
-            return [int(round(v * factor)) for v in value]
-        return int(round(value * factor))
+            return [scaled(v) for v in value]
+        return max(int(round(value * factor)), 1 if value > 0 else 0)
 
-    return {
+    out = {
         key: scaled(scheduler[key])
         for key in SCHEDULE_TIME_KEYS if key in scheduler
     }
+    if 'end' in out and out['end'] <= out.get('begin', 0):
+        out['end'] = out.get('begin', 0) + 1
+    return out
 
 
 def tool(name: str) -> List[str]:
