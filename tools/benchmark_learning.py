@@ -51,6 +51,11 @@ _CAMERA_LSS = [
     'model.view_transform.use_sdg=False', 'model.depth_net.seg_channels=0',
     'model.loss_seg=None'
 ]
+#: SDG-OCC Table 3's "+SDG" row (configs/sdg_occ/ablations/
+#: sdgocc-camera-sdg_*): the SDG lift without the LiDAR branch.
+_CAMERA_SDG = [
+    'model.variant=camera', 'model.lidar_encoder=None', 'model.fusion=None'
+]
 #: Named runs: name -> (config, extra --cfg-options).
 RUNS = {
     'occcyl-tiny': ('configs/occ_cyl/'
@@ -80,6 +85,10 @@ RUNS.update({
     'sdg-fusion-small': (_SDG_SMALL.format('fusion'), []),
     'sdg-kl-small': (_SDG_SMALL.format('kl'), []),
     'sdg-camera-lss-small': (_SDG_SMALL.format('fusion'), _CAMERA_LSS),
+    'sdg-camera-sdg-small': (_SDG_SMALL.format('fusion'), _CAMERA_SDG),
+    # SDG-KL whose teacher decodes with its own BEV encoder and head.
+    'sdg-kl-small-teacherhead': (_SDG_SMALL.format('kl'),
+                                 ['model.separate_teacher_head=True']),
 })
 #: Files of a run folder.
 RESULT, SETTINGS, CLOCK = 'result.json', 'settings.json', 'train_clock.json'

@@ -88,6 +88,13 @@ class SDGOcc(BaseOccDetector):
             Defaults to None.
         teacher_loss_weight (float): Factor of the teacher's occupancy
             losses in ``'kl'`` training. Defaults to 1.0.
+        separate_teacher_head (bool): ``'kl'`` only. False (the default)
+            decodes the teacher's fused BEV with the student's BEV encoder
+            and head, one set of weights fitting both; True gives the
+            teacher its own BEV encoder and head (``teacher_bev_encoder``,
+            ``teacher_occ_head``, training only), so the inference head
+            fits the camera BEV alone and FOAD is the only link between
+            the two. The paper does not say which.
         seg_empty_label (int, optional): 2D semantic target of feature
             cells that no labelled LiDAR return hits. None (the default)
             ignores them: nothing says what such a cell shows, and a label
@@ -126,6 +133,7 @@ class SDGOcc(BaseOccDetector):
                  loss_depth: Optional[dict] = None,
                  loss_seg: Optional[dict] = None,
                  teacher_loss_weight: float = 1.0,
+                 separate_teacher_head: bool = False,
                  seg_empty_label: Optional[int] = None,
                  downsample: int = 16,
                  num_frames: int = 1,
@@ -180,6 +188,14 @@ class SDGOcc(BaseOccDetector):
         self.bev_encoder = MODELS.build(bev_encoder)
         self.occ_head = self.build_child(
             occ_head, dz=self.occ_shape[2], **self.head_defaults())
+        if separate_teacher_head and variant != 'kl':
+            raise ValueError('SDGOcc: separate_teacher_head is for '
+                             f"variant='kl' only, got {variant!r}")
+        self.teacher_bev_encoder = self.teacher_occ_head = None
+        if separate_teacher_head:
+            self.teacher_bev_encoder = MODELS.build(bev_encoder)
+            self.teacher_occ_head = self.build_child(
+                occ_head, dz=self.occ_shape[2], **self.head_defaults())
         self.lidar_encoder = self.build_child(lidar_encoder, **grid)
         self.fusion = None
         if fusion:
@@ -500,8 +516,12 @@ class SDGOcc(BaseOccDetector):
             losses.update(self.occ_head.loss(self.bev_encoder(fused), gt_occ))
             return losses
         losses.update(self.occ_head.loss(self.bev_encoder(cam['bev']), gt_occ))
-        teacher = self.occ_head.loss(
-            self.bev_encoder(fused), gt_occ, suffix='_teacher')
+        teacher_encoder, teacher_head = self.bev_encoder, self.occ_head
+        if self.teacher_occ_head is not None:
+            teacher_encoder = self.teacher_bev_encoder
+            teacher_head = self.teacher_occ_head
+        teacher = teacher_head.loss(
+            teacher_encoder(fused), gt_occ, suffix='_teacher')
         losses.update({
             key: value * self.teacher_loss_weight
             for key, value in teacher.items()

@@ -151,6 +151,50 @@ def test_kl_distillation_is_one_way():
                for p in model.depth_net.parameters())
 
 
+def _grad_sum(module):
+    return sum(float(p.grad.abs().sum()) for p in module.parameters()
+               if p.grad is not None)
+
+
+@pytest.mark.parametrize('separate', [False, True])
+def test_kl_teacher_loss_trains_the_head_it_decodes_with(separate):
+    """The teacher's occupancy loss alone reaches the student's (inference)
+    BEV encoder and head when they are shared (the default), and only the
+    teacher's own copies with ``separate_teacher_head``; the student's loss
+    then leaves the teacher's copies without gradient. Inference (tensor
+    mode) never runs the teacher's copies."""
+    cfg = dict(_cfg('kl'), separate_teacher_head=separate)
+    torch.manual_seed(0)
+    model = MODELS.build(cfg).train()
+    inputs, samples = _batch(num_points=(60, 60))
+    losses = model(inputs, samples, mode='loss')
+    losses['loss_focal_teacher'].backward(retain_graph=True)
+    student_side = _grad_sum(model.occ_head) + _grad_sum(model.bev_encoder)
+    if not separate:
+        assert model.teacher_occ_head is None
+        assert not any(k.startswith('teacher_')
+                       for k in model.state_dict())
+        assert student_side > 0
+        return
+    assert student_side == 0
+    assert _grad_sum(model.teacher_occ_head) > 0
+    assert _grad_sum(model.teacher_bev_encoder) > 0
+    model.zero_grad()
+    losses['loss_focal'].backward()
+    assert _grad_sum(model.occ_head) > 0
+    assert _grad_sum(model.teacher_occ_head) == 0
+    assert _grad_sum(model.teacher_bev_encoder) == 0
+    calls = _count_calls(model.teacher_occ_head)
+    with torch.no_grad():
+        model.eval()(inputs, samples, mode='tensor')
+    assert calls == []
+
+
+def test_separate_teacher_head_is_refused_outside_kl():
+    with pytest.raises(ValueError, match="variant='kl' only"):
+        MODELS.build(dict(_cfg('fusion'), separate_teacher_head=True))
+
+
 def test_kl_inference_skips_lidar_encoder_and_fusion():
     """SDG-KL's predict and tensor modes never run the SPVCNN branch or the
     fusion; SDG-Fusion's run each once per call; training KL runs both."""

@@ -230,6 +230,9 @@ _CAMERA_OFF = dict(variant='camera', lidar_encoder=None, fusion=None,
     ('occcyl-small-nodepthsup', dict(loss_depth=None)),
     ('sdg-camera-lss-tiny', _CAMERA_OFF),
     ('sdg-camera-lss-small', _CAMERA_OFF),
+    ('sdg-camera-sdg-small',
+     dict(variant='camera', lidar_encoder=None, fusion=None)),
+    ('sdg-kl-small-teacherhead', dict(separate_teacher_head=True)),
 ])
 def test_ablation_runs_switch_their_module_off(name, expect):
     """Each named ablation run is its base config with only the named
