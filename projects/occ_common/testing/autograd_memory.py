@@ -1,8 +1,11 @@
 """What autograd keeps for the backward, for tests of memory savings."""
+import weakref
 from typing import Callable, List, Sequence, Tuple, TypeVar
 
 import torch
 from torch import Tensor
+from torch.utils._python_dispatch import TorchDispatchMode
+from torch.utils._pytree import tree_flatten
 
 T = TypeVar('T')
 
@@ -95,3 +98,57 @@ def same_weights_pair(reference_type: type, recomputed_type: type,
     reference.train()  # mmdet's train() returns None: not chained
     recomputed.train()
     return reference, recomputed
+
+
+class _NewStorageBytes(TorchDispatchMode):
+    """Live and peak bytes of the storages that ops create under it."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.live = self.peak = 0
+        self._alive = {}
+
+    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+        out = func(*args, **(kwargs or {}))
+        # Views, detaches and in-place ops return an input's storage.
+        inputs = {
+            t.untyped_storage().data_ptr()
+            for t in tree_flatten((args, kwargs))[0]
+            if isinstance(t, Tensor)
+        }
+        for tensor in tree_flatten(out)[0]:
+            if not isinstance(tensor, Tensor):
+                continue
+            storage = tensor.untyped_storage()
+            if id(storage) in self._alive or \
+                    storage.data_ptr() in inputs:
+                continue
+            nbytes = storage.nbytes()
+            self.live += nbytes
+            self.peak = max(self.peak, self.live)
+            self._alive[id(storage)] = weakref.finalize(
+                storage, self._free, id(storage), nbytes)
+        return out
+
+    def _free(self, key: int, nbytes: int) -> None:
+        self.live -= nbytes
+        self._alive.pop(key, None)
+
+
+def peak_new_bytes(run: Callable[[], T]) -> Tuple[T, int]:
+    """Call ``run`` and measure the most bytes that tensors it created held
+    at once (e.g. a backward's temporaries).
+
+    Every storage an operator creates while ``run`` executes (backward
+    formulas and custom ``Function`` backwards included) counts from its
+    creation to its release; storages that existed before do not count.
+
+    Args:
+        run (Callable[[], T]): E.g. ``lambda: loss.backward()``.
+
+    Returns:
+        tuple: ``run``'s result and the peak bytes.
+    """
+    with _NewStorageBytes() as mode:
+        out = run()
+    return out, mode.peak
