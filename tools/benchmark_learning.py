@@ -89,6 +89,9 @@ RUNS.update({
     # SDG-KL whose teacher decodes with its own BEV encoder and head.
     'sdg-kl-small-teacherhead': (_SDG_SMALL.format('kl'),
                                  ['model.separate_teacher_head=True']),
+    # SDG-KL whose teacher's loss does not reach the camera branch.
+    'sdg-kl-small-detachcam': (_SDG_SMALL.format('kl'),
+                               ['model.detach_teacher_camera=True']),
 })
 #: Files of a run folder.
 RESULT, SETTINGS, CLOCK = 'result.json', 'settings.json', 'train_clock.json'

@@ -95,6 +95,12 @@ class SDGOcc(BaseOccDetector):
             ``teacher_occ_head``, training only), so the inference head
             fits the camera BEV alone and FOAD is the only link between
             the two. The paper does not say which.
+        detach_teacher_camera (bool): ``'kl'`` only. False (the default)
+            lets the teacher's occupancy loss reach the camera branch
+            through the camera keys and values of its fusion; True feeds
+            the fusion a detached camera BEV, so that the camera branch
+            learns from its own occupancy loss and FOAD alone (the paper
+            does not say which).
         seg_empty_label (int, optional): 2D semantic target of feature
             cells that no labelled LiDAR return hits. None (the default)
             ignores them: nothing says what such a cell shows, and a label
@@ -134,6 +140,7 @@ class SDGOcc(BaseOccDetector):
                  loss_seg: Optional[dict] = None,
                  teacher_loss_weight: float = 1.0,
                  separate_teacher_head: bool = False,
+                 detach_teacher_camera: bool = False,
                  seg_empty_label: Optional[int] = None,
                  downsample: int = 16,
                  num_frames: int = 1,
@@ -188,9 +195,12 @@ class SDGOcc(BaseOccDetector):
         self.bev_encoder = MODELS.build(bev_encoder)
         self.occ_head = self.build_child(
             occ_head, dz=self.occ_shape[2], **self.head_defaults())
-        if separate_teacher_head and variant != 'kl':
-            raise ValueError('SDGOcc: separate_teacher_head is for '
-                             f"variant='kl' only, got {variant!r}")
+        for name, value in (('separate_teacher_head', separate_teacher_head),
+                            ('detach_teacher_camera', detach_teacher_camera)):
+            if value and variant != 'kl':
+                raise ValueError(f'SDGOcc: {name} is for '
+                                 f"variant='kl' only, got {variant!r}")
+        self.detach_teacher_camera = bool(detach_teacher_camera)
         self.teacher_bev_encoder = self.teacher_occ_head = None
         if separate_teacher_head:
             self.teacher_bev_encoder = MODELS.build(bev_encoder)
@@ -511,7 +521,10 @@ class SDGOcc(BaseOccDetector):
                 self.occ_head.loss(self.bev_encoder(cam['bev']), gt_occ))
             return losses
         lidar = self.extract_lidar_bev(inputs)
-        fused = self.fuse(lidar, cam)
+        if self.variant == 'kl' and self.detach_teacher_camera:
+            fused = self.fuse(lidar, dict(cam, bev=cam['bev'].detach()))
+        else:
+            fused = self.fuse(lidar, cam)
         if self.variant == 'fusion':
             losses.update(self.occ_head.loss(self.bev_encoder(fused), gt_occ))
             return losses

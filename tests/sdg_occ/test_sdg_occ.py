@@ -190,9 +190,31 @@ def test_kl_teacher_loss_trains_the_head_it_decodes_with(separate):
     assert calls == []
 
 
-def test_separate_teacher_head_is_refused_outside_kl():
+@pytest.mark.parametrize('detach', [False, True])
+def test_kl_teacher_loss_reaches_the_camera_unless_detached(detach):
+    """The teacher's occupancy loss alone moves the camera branch (through
+    the fusion's camera keys and values) by default, and leaves it without
+    gradient with ``detach_teacher_camera``, while still training the
+    fusion; the student's loss reaches the camera branch either way."""
+    torch.manual_seed(0)
+    model = MODELS.build(dict(_cfg('kl'), detach_teacher_camera=detach))
+    model.train()
+    inputs, samples = _batch(num_points=(60, 60))
+    losses = model(inputs, samples, mode='loss')
+    losses['loss_focal_teacher'].backward(retain_graph=True)
+    camera = _grad_sum(model.depth_net) + _grad_sum(model.camera_bev_conv)
+    assert (camera == 0) == detach
+    assert _grad_sum(model.fusion) > 0
+    model.zero_grad()
+    losses['loss_focal'].backward()
+    assert _grad_sum(model.depth_net) > 0
+
+
+@pytest.mark.parametrize('switch',
+                         ['separate_teacher_head', 'detach_teacher_camera'])
+def test_teacher_switches_are_refused_outside_kl(switch):
     with pytest.raises(ValueError, match="variant='kl' only"):
-        MODELS.build(dict(_cfg('fusion'), separate_teacher_head=True))
+        MODELS.build(dict(_cfg('fusion'), **{switch: True}))
 
 
 def test_kl_inference_skips_lidar_encoder_and_fusion():
