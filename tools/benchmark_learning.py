@@ -86,12 +86,10 @@ RUNS.update({
     'sdg-kl-small': (_SDG_SMALL.format('kl'), []),
     'sdg-camera-lss-small': (_SDG_SMALL.format('fusion'), _CAMERA_LSS),
     'sdg-camera-sdg-small': (_SDG_SMALL.format('fusion'), _CAMERA_SDG),
-    # SDG-KL whose teacher decodes with its own BEV encoder and head.
-    'sdg-kl-small-teacherhead': (_SDG_SMALL.format('kl'),
-                                 ['model.separate_teacher_head=True']),
-    # SDG-KL whose teacher's loss does not reach the camera branch.
-    'sdg-kl-small-detachcam': (_SDG_SMALL.format('kl'),
-                               ['model.detach_teacher_camera=True']),
+    # SDG-KL whose teacher decodes with the student's BEV encoder and
+    # head (the configs give it its own: kl_model's comment).
+    'sdg-kl-small-sharedhead': (_SDG_SMALL.format('kl'),
+                                ['model.separate_teacher_head=False']),
 })
 #: Files of a run folder.
 RESULT, SETTINGS, CLOCK = 'result.json', 'settings.json', 'train_clock.json'

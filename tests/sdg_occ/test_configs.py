@@ -48,7 +48,8 @@ COUPLED = {
 }
 KL_KEYS = {
     'variant', 'loss_distill.type', 'loss_distill.alpha',
-    'loss_distill.beta', 'loss_distill.loss_weight', 'teacher_loss_weight'
+    'loss_distill.beta', 'loss_distill.loss_weight', 'teacher_loss_weight',
+    'separate_teacher_head'
 }
 #: Table 3's rows without the SDG lift also drop its semantic head.
 NO_SDG_KEYS = {'view_transform.use_sdg', 'depth_net.seg_channels', 'loss_seg'}

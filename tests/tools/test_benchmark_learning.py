@@ -232,8 +232,7 @@ _CAMERA_OFF = dict(variant='camera', lidar_encoder=None, fusion=None,
     ('sdg-camera-lss-small', _CAMERA_OFF),
     ('sdg-camera-sdg-small',
      dict(variant='camera', lidar_encoder=None, fusion=None)),
-    ('sdg-kl-small-teacherhead', dict(separate_teacher_head=True)),
-    ('sdg-kl-small-detachcam', dict(detach_teacher_camera=True)),
+    ('sdg-kl-small-sharedhead', dict(separate_teacher_head=False)),
 ])
 def test_ablation_runs_switch_their_module_off(name, expect):
     """Each named ablation run is its base config with only the named
