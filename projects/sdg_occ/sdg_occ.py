@@ -14,7 +14,9 @@ channel-to-height occupancy head.
   (LiDAR queries, camera keys and values) is a teacher, supervised by the
   occupancy loss, and FOAD distils it into the camera BEV, which is also
   supervised; at inference the LiDAR encoder and the fusion are skipped
-  and the camera BEV goes to the head.
+  and the camera BEV goes to the head. The teacher decodes its fused BEV
+  with the student's BEV encoder and head, or (``separate_teacher_head``,
+  as the configs do) with its own training-only copies.
 * ``variant='camera'`` (the Baseline and "+SDG" rows of Table 3): no LiDAR
   encoder, no fusion; the camera BEV goes to the head. With the plain LSS
   lift this is the FlashOcc-like baseline, which needs no LiDAR points at
