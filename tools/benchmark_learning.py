@@ -90,6 +90,12 @@ RUNS.update({
     # head (the configs give it its own: kl_model's comment).
     'sdg-kl-small-sharedhead': (_SDG_SMALL.format('kl'),
                                 ['model.separate_teacher_head=False']),
+    # ... and whose teacher's loss does not reach the camera branch.
+    'sdg-kl-small-sharedhead-detachcam': (
+        _SDG_SMALL.format('kl'), [
+            'model.separate_teacher_head=False',
+            'model.detach_teacher_camera=True'
+        ]),
 })
 #: Files of a run folder.
 RESULT, SETTINGS, CLOCK = 'result.json', 'settings.json', 'train_clock.json'

@@ -8,8 +8,8 @@ from mmdet3d.utils import ConfigType, OptMultiConfig
 from mmengine.model import BaseModule
 from torch import Tensor, nn
 
+from projects.occ_common.models.layers import cell_max
 from projects.occ_common.models.layers.checkpointing import checkpoint_if_grad
-from .cell_max import cell_max
 
 #: For the planes in the order they are returned, (R, Theta), (Theta, Z)
 #: and (R, Z): the pooled cylinder axis and the two kept axes, as columns
@@ -38,7 +38,7 @@ class SpatialGroupPooling(BaseModule):
     pools to -0.3, not 0. A group without any occupied voxel is 0. The
     gradient of a pooled value reaches the voxel that holds the maximum;
     voxels of one group that tie exactly share it equally (torch's ``amax``
-    rule; :func:`~.cell_max.cell_max`).
+    rule; :func:`~projects.occ_common.models.layers.cell_max`).
 
     Args:
         in_channels (int): Channels ``C`` of the voxel features.
@@ -123,7 +123,7 @@ class SpatialGroupPooling(BaseModule):
         channels = feats.shape[1]
         # Only occupied voxels compete; a cell no voxel reaches is 0.
         # torch's index_reduce amax values and gradient, with a backward
-        # ~3 GB smaller at the paper's cylinder (cell_max.py).
+        # ~3 GB smaller at the paper's cylinder.
         out = cell_max(feats, cell, batch_size * size_a * size_b * groups)
         # (B, a, b, M * C) viewed as (B, M * C, a, b): channels-last strides,
         # no copy of the largest tensor of the fusion.

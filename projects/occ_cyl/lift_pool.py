@@ -33,6 +33,8 @@ from torch import Tensor
 from torch.autograd import Function
 from torch.autograd.function import once_differentiable
 
+from projects.occ_common.models.layers import cell_max
+
 
 def _check_voxel_index(voxel_idx: Tensor, num_voxels: int) -> None:
     if voxel_idx.dtype != torch.long:
@@ -84,11 +86,7 @@ def _voxel_max(feats: Tensor, voxel_idx: Tensor, num_voxels: int) -> Tensor:
     # Points outside go to a spare row V, dropped at the end: no copy of
     # the features for a mask.
     rows = torch.where(voxel_idx >= 0, voxel_idx, num_voxels)
-    with warnings.catch_warnings():
-        warnings.filterwarnings('ignore', message='index_reduce')
-        # include_self=False: a voxel no point reaches keeps its 0.
-        out = feats.new_zeros(num_voxels + 1, feats.shape[1]).index_reduce_(
-            0, rows, feats, 'amax', include_self=False)
+    out = cell_max(feats, rows, num_voxels + 1)
     return out[:num_voxels]
 
 

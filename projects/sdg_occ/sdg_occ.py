@@ -523,7 +523,7 @@ class SDGOcc(BaseOccDetector):
                 self.occ_head.loss(self.bev_encoder(cam['bev']), gt_occ))
             return losses
         lidar = self.extract_lidar_bev(inputs)
-        if self.variant == 'kl' and self.detach_teacher_camera:
+        if self.detach_teacher_camera:  # 'kl' only (checked at build)
             fused = self.fuse(lidar, dict(cam, bev=cam['bev'].detach()))
         else:
             fused = self.fuse(lidar, cam)

@@ -233,6 +233,8 @@ _CAMERA_OFF = dict(variant='camera', lidar_encoder=None, fusion=None,
     ('sdg-camera-sdg-small',
      dict(variant='camera', lidar_encoder=None, fusion=None)),
     ('sdg-kl-small-sharedhead', dict(separate_teacher_head=False)),
+    ('sdg-kl-small-sharedhead-detachcam',
+     dict(separate_teacher_head=False, detach_teacher_camera=True)),
 ])
 def test_ablation_runs_switch_their_module_off(name, expect):
     """Each named ablation run is its base config with only the named

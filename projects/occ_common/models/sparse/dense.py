@@ -9,6 +9,7 @@ from typing import Sequence
 import torch
 from torch import Tensor
 
+from ..layers.cell_max import cell_max
 from .sparse_tensor import SparseTensor
 
 BEV_REDUCTIONS = ('concat', 'max', 'mean', 'sum')
@@ -55,16 +56,13 @@ def scatter_bev(features: Tensor, batch: Tensor, cell_y: Tensor,
     height, width = (int(s) for s in bev_shape)
     channels = features.shape[1]
     cells = (batch.long() * height + cell_y.long()) * width + cell_x.long()
-    flat = features.new_zeros(batch_size * height * width, channels)
+    num_cells = batch_size * height * width
     if reduce == 'max':
-        flat = flat.scatter_reduce(
-            0,
-            cells[:, None].expand(-1, channels),
-            features,
-            reduce='amax',
-            include_self=False)
+        # Empty cells 0; ties share the gradient (cell_max).
+        flat = cell_max(features, cells, num_cells)
     elif reduce in ('mean', 'sum'):
-        flat = flat.index_add(0, cells, features)
+        flat = features.new_zeros(num_cells, channels).index_add(
+            0, cells, features)
         if reduce == 'mean':
             counts = torch.bincount(cells, minlength=flat.shape[0])
             flat = flat / counts.clamp(min=1).to(flat.dtype)[:, None]

@@ -1,11 +1,16 @@
 """``cell_max``: torch's ``index_reduce`` amax, values and gradient, with a
 backward that keeps far fewer temporaries."""
+import importlib
+
 import pytest
 import torch
 
-import projects.occ_cyl.cell_max as cell_max_module
+from projects.occ_common.models.layers.cell_max import cell_max
 from projects.occ_common.testing.autograd_memory import peak_new_bytes
-from projects.occ_cyl.cell_max import cell_max
+
+# The module (the package's ``cell_max`` attribute is the function).
+cell_max_module = importlib.import_module(
+    'projects.occ_common.models.layers.cell_max')
 
 
 def _reference(feats, cell, num_cells):

@@ -1,7 +1,8 @@
 """Per-cell maximum of row features with a backward that stays small.
 
 :func:`cell_max` is ``zeros.index_reduce_(0, cell, feats, 'amax',
-include_self=False)`` (what the spatial group pooling computes) with the
+include_self=False)`` (OccCylindrical's spatial group pooling and voxel
+max pooling, the ``'max'`` BEV scatter of the sparse backends) with the
 same values and, but for one case, the same gradient, bit for bit: rows of
 one cell that tie exactly at its maximum share the cell's gradient
 equally (torch's ``amax`` rule), and a cell no row reaches stays 0.
@@ -21,8 +22,9 @@ cylinder (480 x 368 x 32, M = 8, 64 channels) one (R, Theta) plane is
 361 MiB and the occupied camera voxels about as much, so that backward
 peaked ~3 GB above its inputs and set the training iteration's peak
 memory (issue 18). This one keeps one output-sized float tensor (the tie
-counts, overwritten by the shared gradient) and the gradient it returns;
-the equality masks are recomputed in chunks of rows.
+counts, overwritten by the shared gradient), a boolean mask of the rows at
+their cell's maximum (a quarter of the input's bytes) and the gradient it
+returns; the float temporaries are made in chunks of rows.
 """
 import warnings
 
@@ -62,24 +64,24 @@ class CellMaxFunction(Function):
         grad_out = grad_out.contiguous()
         chunks = [(start, min(start + CHUNK_ROWS, feats.shape[0]))
                   for start in range(0, feats.shape[0], CHUNK_ROWS)]
-
-        def is_max(start: int, end: int) -> Tensor:
-            rows = cell[start:end]
-            return (feats[start:end] == out.index_select(0, rows)).to(
-                feats.dtype)
-
+        at_max = torch.empty_like(feats, dtype=torch.bool)
+        for start, end in chunks:
+            torch.eq(feats[start:end],
+                     out.index_select(0, cell[start:end]),
+                     out=at_max[start:end])
         # How many rows share each maximum, then the share of each (as
         # torch: grad / N, times the 0/1 mask); cells no row reaches get
         # a 0 / 0 that no row ever reads.
         share = torch.zeros_like(out)
         for start, end in chunks:
-            share.index_add_(0, cell[start:end], is_max(start, end))
+            share.index_add_(0, cell[start:end],
+                             at_max[start:end].to(feats.dtype))
         torch.div(grad_out, share, out=share)
         grad_feats = torch.empty_like(feats)
         for start, end in chunks:
             torch.mul(
                 share.index_select(0, cell[start:end]),
-                is_max(start, end),
+                at_max[start:end],
                 out=grad_feats[start:end])
         return grad_feats, None, None
 
