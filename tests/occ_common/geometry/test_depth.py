@@ -59,6 +59,35 @@ def test_depth_bins_follow_the_paper_counts():
         depth_bin_values((1, 51))
 
 
+def test_nearest_bin_removes_the_half_step_bias_of_the_lift():
+    """Bins of (1, 11, 2.5) are lifted at 1, 3.5, 6 and 8.5 m. For depths
+    uniform in [1, 8.5) BEVDepth's floor trains each onto a point on
+    average 1.25 m (half a step) closer, 1.25 m off in absolute value;
+    nearest_bin gives mean error 0 and mean absolute error 0.625 m (a
+    quarter step). Edges: floor keeps (0 <) 1 to 11 m, nearest (0 <) d < 9.75 m."""
+    bound = (1.0, 11.0, 2.5)
+    # 3000 depths at the centres of 2.5 mm steps over [1, 8.5).
+    depth = (1.0 + (torch.arange(3000.0) + 0.5) * 2.5e-3).view(1, 1, -1)
+    d = depth.flatten()
+    for nearest, bias, spread in ((False, -1.25, 1.25), (True, 0.0, 0.625)):
+        onehot, valid = depth_to_bins(depth, 1, bound, nearest_bin=nearest)
+        assert bool(valid.all())
+        lifted = depth_bin_values(bound)[onehot.argmax(1)]
+        assert float((lifted - d).mean()) == pytest.approx(bias, abs=1e-4)
+        assert float((lifted - d).abs().mean()) == pytest.approx(
+            spread, abs=1e-4)
+    # 2.3 m: 1.3 m past the 1 m point, 1.2 m before the 3.5 m one.
+    edges = torch.tensor([[[0.5, 0.9, 1.2, 2.3, 9.7, 9.8, 10.9]]])
+    floor_bins = depth_to_bins(edges, 1, bound)
+    near_bins = depth_to_bins(edges, 1, bound, nearest_bin=True)
+    assert floor_bins[1].tolist() == [False, False, True, True, True, True,
+                                      True]
+    assert floor_bins[0].argmax(1)[floor_bins[1]].tolist() == [0, 0, 3, 3, 3]
+    assert near_bins[1].tolist() == [True, True, True, True, True, False,
+                                     False]
+    assert near_bins[0].argmax(1)[near_bins[1]].tolist() == [0, 0, 0, 1, 3]
+
+
 def test_project_points_empty_and_gradient():
     """No points give (N, 0, 2) pixels; the projection is differentiable:
     u = 32 - 32 y / x at camera 0, so du/dy = -32 / x = -8 at x = 4."""

@@ -28,12 +28,16 @@ class DepthBCELoss(nn.Module):
             Defaults to 16.
         loss_weight (float): Factor applied to the loss. Defaults to 3.0,
             BEVDepth's weight.
+        nearest_bin (bool): Train each depth onto the bin whose lifted
+            point is nearest to it, not BEVDepth's ``floor`` (half a bin
+            closer on average; :func:`depth_to_bins`). Defaults to False.
     """
 
     def __init__(self,
                  depth_bound: Sequence[float] = (1.0, 50.0, 1.0),
                  downsample: int = 16,
-                 loss_weight: float = 3.0) -> None:
+                 loss_weight: float = 3.0,
+                 nearest_bin: bool = False) -> None:
         super().__init__()
         self.num_bins = num_depth_bins(depth_bound)
         if int(downsample) != downsample or downsample < 1:
@@ -42,6 +46,7 @@ class DepthBCELoss(nn.Module):
         self.depth_bound = tuple(float(v) for v in depth_bound)
         self.downsample = int(downsample)
         self.loss_weight = loss_weight
+        self.nearest_bin = bool(nearest_bin)
 
     @property
     def loss_name(self) -> str:
@@ -76,7 +81,7 @@ class DepthBCELoss(nn.Module):
                 f'not match gt_depth {tuple(gt_depth.shape)} at downsample='
                 f'{self.downsample}; expected {expected}.')
         target, valid = depth_to_bins(gt_depth.float(), self.downsample,
-                                      self.depth_bound)
+                                      self.depth_bound, self.nearest_bin)
         pred = depth_pred.float().permute(0, 2, 3, 1).reshape(
             -1, self.num_bins)
         picked = pred[valid]

@@ -36,6 +36,30 @@ def test_depth_loss_hand_computed():
     assert torch.equal(pred.grad[0, :, 0, 1], torch.zeros(4))
 
 
+def test_nearest_bin_changes_the_target_the_loss_pulls_to():
+    """One pixel at 2.6 m, bins lifted at 1, 2, 3, 4 m, prediction (0.1,
+    0.1, 0.7, 0.1). floor: bin 1 (2 m), BCE -2 ln 0.9 - ln 0.1 - ln 0.3 =
+    0.2107210 + 2.3025851 + 1.2039728 = 3.7172789; nearest_bin: bin 2 (3
+    m, 0.4 m away, not 0.6), BCE -3 ln 0.9 - ln 0.7 = 0.3160815 + 0.3566749
+    = 0.6727564. A descent step raises bin 1 under floor, bin 2 under
+    nearest_bin (the target's gradient is negative, the others' positive)."""
+    depth = torch.tensor([[[2.6]]])
+    losses, grads = {}, {}
+    for nearest in (False, True):
+        pred = torch.tensor([0.1, 0.1, 0.7, 0.1]).view(1, 4, 1, 1)
+        pred.requires_grad_()
+        loss = DepthBCELoss(BOUND, downsample=1, loss_weight=1.0,
+                            nearest_bin=nearest)(pred, depth)
+        loss.backward()
+        losses[nearest], grads[nearest] = loss.item(), pred.grad.flatten()
+    assert losses[False] == pytest.approx(
+        -2 * math.log(0.9) - math.log(0.1) - math.log(0.3), rel=1e-6)
+    assert losses[False] == pytest.approx(3.7172789, abs=1e-6)
+    assert losses[True] == pytest.approx(0.6727564, abs=1e-6)
+    assert grads[False][1] < 0 < grads[False][2]
+    assert grads[True][2] < 0 < grads[True][1]
+
+
 @pytest.mark.parametrize('bad', [float('nan'), float('inf')])
 def test_non_finite_prediction_gives_nan_not_a_crash(bad):
     """A diverged depth net: BCE raised "all elements of input should be
