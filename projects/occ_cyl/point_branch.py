@@ -137,6 +137,12 @@ class LidarPointBranch(BaseModule):
             attributes. Defaults to True.
         with_image_features (bool): Sample ``V_context``; False gives a
             LiDAR-only branch. Defaults to True.
+        input_norm (bool): Normalise the raw attributes (one ``norm_cfg``
+            layer) before the geometric MLP, as the point encoders of
+            Cylinder3D and PointOcc (the paper's ref. [18]) do: x, y in
+            tens of metres, intensity in 0-255 and the angle in radians
+            otherwise enter the first layer at scales 100x apart. The paper
+            does not say. Defaults to False.
         norm_cfg (dict): Normalisation of the MLPs. Defaults to BN1d.
         init_cfg (dict, optional): Initialisation config. Defaults to None.
     """
@@ -148,6 +154,7 @@ class LidarPointBranch(BaseModule):
                  out_channels: Sequence[int] = (64, 64),
                  with_cylindrical_input: bool = True,
                  with_image_features: bool = True,
+                 input_norm: bool = False,
                  norm_cfg: ConfigType = dict(type='BN1d'),
                  init_cfg: OptMultiConfig = None) -> None:
         super().__init__(init_cfg=init_cfg)
@@ -158,6 +165,8 @@ class LidarPointBranch(BaseModule):
         self.with_cylindrical_input = with_cylindrical_input
         self.with_image_features = with_image_features
         geo_in = in_channels + (2 if with_cylindrical_input else 0)
+        self.input_norm = build_norm_layer(
+            norm_cfg, geo_in)[1] if input_norm else None
         self.geo_mlp = _mlp([geo_in, *geo_channels], norm_cfg)
         fuse_in = geo_channels[-1] + (
             img_channels if with_image_features else 0)
@@ -203,6 +212,9 @@ class LidarPointBranch(BaseModule):
         if self.with_cylindrical_input:
             cyl = cartesian_to_cylindrical(pts[:, :3])
             geo_in = torch.cat([pts, cyl[:, :2]], dim=1)
+        if self.input_norm is not None:
+            geo_in = batch_norm_rows(self.input_norm, geo_in) if isinstance(
+                self.input_norm, nn.BatchNorm1d) else self.input_norm(geo_in)
         fused = [run_mlp(self.geo_mlp, geo_in)]
         if self.with_image_features:
             img_feats = [

@@ -115,6 +115,31 @@ def test_one_point_in_training_uses_the_running_statistics():
     torch.testing.assert_close(out.detach(), expected)
 
 
+def test_input_norm_makes_the_branch_blind_to_attribute_scales():
+    """With input_norm a training batch is normalised per attribute before
+    the first layer: intensities given as 100 i + 7 (0-255 counts instead
+    of a 0-1 reflectance) give the same features; without it they do
+    not. One point still trains (the running statistics normalise it)."""
+    gen = torch.Generator().manual_seed(0)
+    pts = torch.randn(50, 5, generator=gen)
+    rescaled = pts.clone()
+    rescaled[:, 3] = 100 * pts[:, 3] + 7
+    ctx = torch.zeros(1, 4, 1, 2, 4)
+    outs = {}
+    for input_norm in (False, True):
+        torch.manual_seed(0)
+        branch = _branch(with_image_features=False, input_norm=input_norm)
+        outs[input_norm] = [
+            branch([p], ctx, _rig()[None], (32, 64), [(32, 64)])[0]
+            for p in (pts, rescaled)
+        ]
+    torch.testing.assert_close(*outs[True], rtol=1e-4, atol=1e-4)
+    assert (outs[False][0] - outs[False][1]).abs().max() > 0.1
+    one = branch([pts[:1]], ctx, _rig()[None], (32, 64), [(32, 64)])[0]
+    one.sum().backward()
+    assert branch.input_norm.weight.grad is not None
+
+
 def test_bad_points_raise():
     """Points with the wrong width name the sample."""
     branch = _branch()
