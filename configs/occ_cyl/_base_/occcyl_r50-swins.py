@@ -122,6 +122,13 @@ model = dict(
         type='LidarPointBranch',
         in_channels=_point_dims,
         img_channels=_context_channels,
+        # The paper does not say how the raw attributes (x, y in tens of
+        # metres, intensity 0-255, angle in radians) are scaled; its
+        # cylinder's source, PointOcc, and Cylinder3D batch-normalise them
+        # before the first layer. Measured on issue 14's benchmark (small
+        # config, 256 iterations, with two-layer MLPs): 58.91 / 17.11
+        # against 58.64 / 16.39 IoU / mIoU without.
+        input_norm=True,
         geo_channels=(_point_channels, _point_channels),
         out_channels=(_point_channels, _point_channels)),
     tpv_fusion=dict(
@@ -177,9 +184,19 @@ model = dict(
                 dict(type='SceneClassAffinityLoss', mode='geo'),
                 dict(type='SceneClassAffinityLoss', mode='sem'),
             ])),
-    # Eq. 19: lambda = 3.
+    # Eq. 19: lambda = 3. The paper places bin k's point at 1 + k d metres
+    # and does not say which LiDAR depths train bin k. BEVDepth's floor
+    # (depths in [1 + k d, 1 + (k + 1) d)) would lift every depth half a
+    # bin too close on average; nearest_bin trains each depth onto its
+    # nearest bin point. Measured on issue 14's benchmark (small config, 2.5
+    # m bins, 256 iterations): 58.64 / 16.39 IoU / mIoU against 59.01 /
+    # 15.30 with floor (bins lifted at their centres instead: 59.94 /
+    # 16.79).
     loss_depth=dict(
-        type='DepthBCELoss', downsample=_img_stride, loss_weight=3.0))
+        type='DepthBCELoss',
+        downsample=_img_stride,
+        loss_weight=3.0,
+        nearest_bin=True))
 
 # Schedule: AdamW lr 5e-5, weight decay 0.01, multistep decay (paper). The
 # epoch count and milestones are not given; 24 epochs with decays at 20 and
