@@ -64,7 +64,8 @@ def test_nearest_bin_removes_the_half_step_bias_of_the_lift():
     uniform in [1, 8.5) BEVDepth's floor trains each onto a point on
     average 1.25 m (half a step) closer, 1.25 m off in absolute value;
     nearest_bin gives mean error 0 and mean absolute error 0.625 m (a
-    quarter step). Edges: floor keeps (0 <) 1 to 11 m, nearest (0 <) d < 9.75 m."""
+    quarter step). Edges: floor keeps 1 <= d < 11 m, nearest 0 < d < 9.75
+    m."""
     bound = (1.0, 11.0, 2.5)
     # 3000 depths at the centres of 2.5 mm steps over [1, 8.5).
     depth = (1.0 + (torch.arange(3000.0) + 0.5) * 2.5e-3).view(1, 1, -1)
