@@ -138,7 +138,7 @@ class LidarPointBranch(BaseModule):
         with_image_features (bool): Sample ``V_context``; False gives a
             LiDAR-only branch. Defaults to True.
         input_norm (bool): Normalise the raw attributes (one ``norm_cfg``
-            layer) before the geometric MLP, as the point encoders of
+            layer, the first of ``geo_mlp``), as the point encoders of
             Cylinder3D and PointOcc (the paper's ref. [18]) do: x, y in
             tens of metres, intensity in 0-255 and the angle in radians
             otherwise enter the first layer at scales 100x apart. The paper
@@ -165,9 +165,11 @@ class LidarPointBranch(BaseModule):
         self.with_cylindrical_input = with_cylindrical_input
         self.with_image_features = with_image_features
         geo_in = in_channels + (2 if with_cylindrical_input else 0)
-        self.input_norm = build_norm_layer(
-            norm_cfg, geo_in)[1] if input_norm else None
+        # The input norm leads the geometric MLP, so that run_mlp's
+        # one-point handling covers it too.
         self.geo_mlp = _mlp([geo_in, *geo_channels], norm_cfg)
+        if input_norm:
+            self.geo_mlp.insert(0, build_norm_layer(norm_cfg, geo_in)[1])
         fuse_in = geo_channels[-1] + (
             img_channels if with_image_features else 0)
         self.fuse_mlp = _mlp([fuse_in, *out_channels], norm_cfg)
@@ -212,9 +214,6 @@ class LidarPointBranch(BaseModule):
         if self.with_cylindrical_input:
             cyl = cartesian_to_cylindrical(pts[:, :3])
             geo_in = torch.cat([pts, cyl[:, :2]], dim=1)
-        if self.input_norm is not None:
-            geo_in = batch_norm_rows(self.input_norm, geo_in) if isinstance(
-                self.input_norm, nn.BatchNorm1d) else self.input_norm(geo_in)
         fused = [run_mlp(self.geo_mlp, geo_in)]
         if self.with_image_features:
             img_feats = [

@@ -116,6 +116,18 @@ def test_ablation_knobs():
             assert model.tpv_fusion.num_groups == int(name[-1])
 
 
+def test_paper_silent_choices_of_issue_14():
+    """Every OccCylindrical config that supervises depth trains it onto the
+    nearest bin point, and every one normalises the raw point attributes
+    (the reasons and numbers: the base config's comments)."""
+    paths = sorted(glob.glob(osp.join(CONFIG_DIR, '*.py')) + ABLATIONS)
+    for path in paths:
+        model = Config.fromfile(path).model
+        assert model.point_branch.input_norm is True, path
+        if model.get('loss_depth') is not None:
+            assert model.loss_depth.nearest_bin is True, path
+
+
 def test_paper_model_parameter_count(capsys):
     """Issue 11, item 5. Table IV: 111.62 M parameters. The paper config
     lands within 3 %: ResNet-50 23,508,032 (torchvision's 25,557,032 minus

@@ -137,7 +137,9 @@ def test_input_norm_makes_the_branch_blind_to_attribute_scales():
     assert (outs[False][0] - outs[False][1]).abs().max() > 0.1
     one = branch([pts[:1]], ctx, _rig()[None], (32, 64), [(32, 64)])[0]
     one.sum().backward()
-    assert branch.input_norm.weight.grad is not None
+    norm = branch.geo_mlp[0]
+    assert isinstance(norm, torch.nn.BatchNorm1d) and norm.num_features == 7
+    assert norm.weight.grad is not None
 
 
 def test_bad_points_raise():

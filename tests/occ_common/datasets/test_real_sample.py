@@ -20,6 +20,8 @@ from mmengine.config import Config
 
 import projects.occ_common  # noqa: F401  (registers)
 from projects.occ_common.datasets.info_format import CAMERA_NAMES
+from projects.occ_common.geometry.depth import (depth_bin_values,
+                                                depth_to_bins, patch_min_depth)
 from projects.occ_common.testing.tool_logs import run_create_data
 from projects.occ_common.utils.safe_pickle import load_info_file
 
@@ -140,6 +142,30 @@ def test_depth_maps_match_an_independent_projection(real_info):
     assert hit.sum() == 19565
     np.testing.assert_array_equal(ours > 0, hit)
     np.testing.assert_allclose(ours[hit], expected[hit], atol=1e-5)
+
+
+def test_nearest_bin_lifts_real_lidar_depths_without_bias(real_info):
+    """The paper's 1 m bins (1, 2, ..., 50 m) on the real depth maps at
+    stride 16: BEVDepth's floor trains the 3,860 feature pixels with a
+    LiDAR depth onto bin points 0.516 m closer on average (every one
+    closer: the mean absolute error is the same), nearest_bin onto points
+    +0.014 m off on average, 0.247 m in absolute value (about a quarter
+    bin, as for uniform depths). Measured on the sample."""
+    state = _inputs_dataset(
+        real_info, [dict(type='PointsToDepthMaps')]).prepare_data(0)
+    gt = torch.as_tensor(state['gt_depth']).float()
+    bound = (1.0, 51.0, 1.0)
+    depth = patch_min_depth(gt, 16).reshape(-1)
+    errors = {}
+    for nearest in (False, True):
+        onehot, valid = depth_to_bins(gt, 16, bound, nearest_bin=nearest)
+        lifted = depth_bin_values(bound)[onehot.argmax(1)]
+        errors[nearest] = (lifted - depth)[valid]
+    assert errors[False].numel() == 3860
+    assert float(errors[False].mean()) == pytest.approx(-0.516, abs=1e-3)
+    assert float(errors[False].max()) <= 0
+    assert abs(float(errors[True].mean())) < 0.02
+    assert float(errors[True].abs().mean()) == pytest.approx(0.247, abs=1e-3)
 
 
 TINY = sorted(glob.glob(osp.join(REPO, 'configs', '*', '*_tiny_*.py')))

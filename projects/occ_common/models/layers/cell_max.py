@@ -33,8 +33,8 @@ from torch import Tensor
 from torch.autograd import Function
 from torch.autograd.function import once_differentiable
 
-#: Rows per chunk of the backward's recomputed masks: 64k rows of 64
-#: channels are 16 MiB of float temporaries.
+#: Rows per chunk of the backward's float temporaries: 64k rows of 64
+#: channels are 16 MiB.
 CHUNK_ROWS = 1 << 16
 
 
