@@ -488,9 +488,12 @@ def _switched(key_path, value):
 ])
 def test_ablation_switches_change_the_output(key_path, value):
     """Each knob of Tables 3-5 changes the BEV the head sees, by more than
-    5 % of its largest value, with the same weights (every weight but a
-    resized bias table copied over). (Through the random head the change
-    shrinks to ~1e-5 of the logits, too close to float noise to test.)"""
+    1 % of its largest value (far above float noise), with the same
+    weights (every weight but a resized bias table copied over). How much
+    depends on the random weights: 8 -> 2 diffusion layers changes it by
+    29 % under torch 2.13, 4.1 % under torch 2.11, whose initialisation
+    draws other numbers. (Through the random head the change shrinks to
+    ~1e-5 of the logits, too close to float noise to test.)"""
     inputs, samples = _batch(num_points=(80, 80))
     base = _model('fusion').eval()
     torch.manual_seed(0)
@@ -504,4 +507,4 @@ def test_ablation_switches_change_the_output(key_path, value):
     with torch.no_grad():
         out = base.extract_feat(inputs, samples)
         out_switched = switched.extract_feat(inputs, samples)
-    assert (out - out_switched).abs().max() > 0.05 * out.abs().max()
+    assert (out - out_switched).abs().max() > 0.01 * out.abs().max()

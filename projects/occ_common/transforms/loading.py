@@ -97,10 +97,10 @@ class LoadOccupancyGT(BaseTransform):
                          or label.max() > len(OCC_CLASS_NAMES)):
             raise ValueError(
                 f'SurroundOcc label {path}: voxel indices must lie in '
-                f'[0, {tuple(grid)}) and labels in 0..{len(OCC_CLASS_NAMES)}'
+                f'[0, {grid}) and labels in 0..{len(OCC_CLASS_NAMES)}'
                 f', got indices {xyz.min(0)}..{xyz.max(0)} and labels '
                 f'{label.min()}..{label.max()}')
-        gt = np.zeros(tuple(grid), dtype=np.uint8)
+        gt = np.zeros(grid, dtype=np.uint8)
         label = np.where(label == 0, self.ignore_index, label)
         gt[xyz[:, 0], xyz[:, 1], xyz[:, 2]] = label
         return dict(gt_occ=gt)
@@ -122,12 +122,12 @@ class LoadOccupancyGT(BaseTransform):
                                  "semantics, mask_lidar, mask_camera, got "
                                  f'{sorted(arrays)}')
             arr = arrays[key]
-            if arr.shape != tuple(grid) or not (
+            if arr.shape != grid or not (
                     np.issubdtype(arr.dtype, np.integer)
                     or arr.dtype == np.bool_):
                 raise ValueError(
                     f'Occ3D label {path}: {key} must be an integer or bool '
-                    f'array of shape {tuple(grid)}, got {arr.dtype} '
+                    f'array of shape {grid}, got {arr.dtype} '
                     f'{arr.shape}')
             out[key] = arr
         sem = out['semantics']
@@ -169,7 +169,8 @@ class LoadOccupancyGT(BaseTransform):
                 f'label in {results.get("ann_file", "its info file")} (a '
                 'split without labels runs with tools/test.py --format-only)')
         raw = read_bytes(path, f'{fmt} occupancy label', None)
-        grid = np.asarray(spec.grid_size)
+        # Python ints: numpy 2 would print np.int64(200) in the messages.
+        grid = tuple(int(g) for g in spec.grid_size)
         loaded = self._surroundocc(raw, path, grid) if fmt == 'surroundocc' \
             else self._occ3d(raw, path, grid)
         results.update(loaded)

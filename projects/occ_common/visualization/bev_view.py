@@ -37,7 +37,9 @@ def top_labels(labels: np.ndarray, drawn: np.ndarray) -> np.ndarray:
     from_top = np.argmax(drawn[..., ::-1], axis=2)
     top = height - 1 - from_top
     picked = np.take_along_axis(labels, top[..., None], axis=2)[..., 0]
-    return np.where(drawn.any(axis=2), picked, -1).astype(np.int64)
+    # int64 before -1 joins: numpy 2 keeps a uint8 array's type and refuses
+    # the -1 (NEP 50); numpy 1 widened it.
+    return np.where(drawn.any(axis=2), picked.astype(np.int64), -1)
 
 
 def columns_to_image(columns: np.ndarray,
