@@ -328,8 +328,10 @@ def test_torch_backend_cuda_matches_cpu():
         for m in layers:
             y = m(y)
         y.features.square().sum().backward()
-        results.append([y.features.cpu()] +
-                       [m.weight.grad.cpu() for m in layers])
+        # Copies: .cpu() of a CPU tensor is the tensor itself, and the next
+        # round's m.to('cuda') moves the parameters' gradients in place.
+        results.append([y.features.detach().cpu().clone()] +
+                       [m.weight.grad.cpu().clone() for m in layers])
     for cpu, cuda in zip(*results):
         torch.testing.assert_close(cpu, cuda, rtol=1e-4, atol=1e-4)
 
