@@ -28,7 +28,12 @@ def _free_port():
 
 def _run(cmd, env=None):
     """Run a tool with the test's interpreter; return the process."""
-    full_env = dict(os.environ, PYTHON=sys.executable, OMP_NUM_THREADS='1')
+    # CUDA hidden: the ranks run on the CPU under gloo even where a GPU is.
+    # With CUDA visible, mmengine's init_dist calls torch.cuda.set_device(
+    # LOCAL_RANK), and rank 1 has no cuda:1 on a one-GPU machine (the test
+    # failed on a lent H200).
+    full_env = dict(os.environ, PYTHON=sys.executable, OMP_NUM_THREADS='1',
+                    CUDA_VISIBLE_DEVICES='')
     full_env.update(env or {})
     return subprocess.run(cmd, cwd=ROOT, env=full_env, capture_output=True,
                           text=True, timeout=400)
