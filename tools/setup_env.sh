@@ -86,8 +86,13 @@ if [[ "$mmcv_step" == build ]]; then
     if ! ls "$dest"/mmcv-"$mmcv_version"-*.whl >/dev/null 2>&1; then
         log "building mmcv $mmcv_version with its ops against torch $torch_tag"
         log "(once per machine, about 8 minutes on 2 cores) into $dest"
-        "${pip[@]}" download -q --no-deps --no-binary :all: -d "$tmp" \
-            "mmcv==$mmcv_version"
+        # --no-build-isolation: mmcv's setup.py imports pkg_resources, which
+        # recent setuptools (84.2.1 when this was written) lacks. Without the
+        # flag pip 23.2+ (Python 3.12's venvs) prepares the sdist's metadata
+        # with the newest setuptools and fails; the pinned build tools
+        # installed above still have it.
+        "${pip[@]}" download -q --no-deps --no-build-isolation \
+            --no-binary :all: -d "$tmp" "mmcv==$mmcv_version"
         # FORCE_CUDA: mmcv compiles CUDA kernels only where it sees a GPU
         # or this flag; a CUDA torch (OCC_BUILD_MMCV=1) wants them.
         MAX_JOBS="${MAX_JOBS:-2}" MMCV_WITH_OPS=1 \
