@@ -211,22 +211,13 @@ def predict_sample(args):
         tuple: The output data sample, the packed inputs of the sample,
         and the label settings of the config's metric.
     """
-    from mmengine.config import Config
     from mmengine.dataset import pseudo_collate
-    from mmengine.registry import DATASETS, MODELS, init_default_scope
-    from mmengine.runner import load_checkpoint
+    from mmengine.registry import DATASETS
 
-    from projects.occ_common.utils import install_checkpoint_loader
+    from projects.occ_common.utils import build_trained_model
 
-    cfg = Config.fromfile(args.config)
-    if args.cfg_options:
-        cfg.merge_from_dict(args.cfg_options)
-    init_default_scope(cfg.get('default_scope', 'mmdet3d'))
-    model = MODELS.build(cfg.model)
-    # Nothing is installed on import: load through the restricted loader.
-    install_checkpoint_loader()
-    load_checkpoint(model, args.checkpoint, map_location='cpu')
-    model.to(args.device).eval()
+    cfg, model = build_trained_model(args.config, args.checkpoint,
+                                     args.cfg_options, args.device)
     dataset = DATASETS.build(cfg.test_dataloader.dataset)
     if not 0 <= args.index < len(dataset):
         raise ValueError(f'--index {args.index} is outside the test set of '

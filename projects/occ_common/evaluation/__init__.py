@@ -3,12 +3,14 @@
 Importing this package registers ``OccupancyMetric`` in mmdet3d's
 ``METRICS`` registry.
 """
+from .depth_bin_accuracy import DepthBinAccuracy
 from .occupancy_confusion import (confusion_matrix, geometric_iou, mean_iou,
                                   per_class_iou)
 from .occupancy_metric import (OCC3D_CLASSES, SURROUNDOCC_CLASSES,
                                OccupancyMetric)
 
 __all__ = [
-    'OCC3D_CLASSES', 'OccupancyMetric', 'SURROUNDOCC_CLASSES',
-    'confusion_matrix', 'geometric_iou', 'mean_iou', 'per_class_iou'
+    'DepthBinAccuracy', 'OCC3D_CLASSES', 'OccupancyMetric',
+    'SURROUNDOCC_CLASSES', 'confusion_matrix', 'geometric_iou', 'mean_iou',
+    'per_class_iou'
 ]

@@ -1,0 +1,42 @@
+"""A config's model with trained weights, for the analysis tools."""
+from typing import Optional, Tuple
+
+from torch import nn
+
+
+def build_trained_model(config: str,
+                        checkpoint: str,
+                        cfg_options: Optional[dict] = None,
+                        device: str = 'cpu') -> Tuple[object, nn.Module]:
+    """Build ``config``'s model and load ``checkpoint`` into it.
+
+    The config's ``custom_imports`` register the plugins; the weights come
+    through the restricted loader (:func:`install_checkpoint_loader`:
+    nothing in the file can run code).
+
+    Args:
+        config (str): Config file.
+        checkpoint (str): Weights (a Runner checkpoint or a state dict).
+        cfg_options (dict, optional): Overrides merged into the config, as
+            ``--cfg-options`` gives them. Defaults to None.
+        device (str): Where the model goes. Defaults to 'cpu'.
+
+    Returns:
+        tuple: ``(cfg, model)``, the merged config and the model in eval
+        mode on ``device``.
+    """
+    from mmengine.config import Config
+    from mmengine.registry import MODELS, init_default_scope
+    from mmengine.runner import load_checkpoint
+
+    from .safe_pickle import install_checkpoint_loader
+
+    cfg = Config.fromfile(config)
+    if cfg_options:
+        cfg.merge_from_dict(cfg_options)
+    init_default_scope(cfg.get('default_scope', 'mmdet3d'))
+    model = MODELS.build(cfg.model)
+    # Nothing is installed on import: load through the restricted loader.
+    install_checkpoint_loader()
+    load_checkpoint(model, checkpoint, map_location='cpu', logger='silent')
+    return cfg, model.to(device).eval()
