@@ -75,17 +75,20 @@ def test_readme_names_only_existing_configs():
 @pytest.mark.parametrize('path', CONFIGS, ids=osp.basename)
 def test_only_sdg_configs_read_lidarseg(path):
     """nuScenes-lidarseg is optional: OccCylindrical's configs never load
-    it nor make 2-D semantic maps; SDG-OCC's make them (from lidarseg
-    where the info has it, else from the occupancy labels). Both drop the
-    ego vehicle's returns."""
+    it nor make 2-D semantic maps, except for training the seg2d variant,
+    whose model has a 2-D semantic loss; SDG-OCC's make them (from
+    lidarseg where the info has it, else from the occupancy labels). All
+    drop the ego vehicle's returns."""
     cfg = Config.fromfile(path)
     sdg = osp.basename(path).startswith('sdgocc')
-    for loader in (cfg.train_dataloader, cfg.test_dataloader):
+    seg2d = cfg.model.get('loss_seg') is not None
+    for loader, reads in ((cfg.train_dataloader, sdg or seg2d),
+                          (cfg.test_dataloader, sdg)):
         steps = {t['type']: t for t in loader.dataset.pipeline}
-        assert ('LoadLidarSegLabels' in steps) == sdg
-        assert ('PointsToSemanticMaps' in steps) == sdg
+        assert ('LoadLidarSegLabels' in steps) == reads
+        assert ('PointsToSemanticMaps' in steps) == reads
         assert 'RemoveEgoPoints' in steps
-        if sdg:
+        if reads:
             assert steps['LoadLidarSegLabels']['optional']
 
 

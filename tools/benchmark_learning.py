@@ -78,10 +78,17 @@ RUNS = {
 # cores train in under an hour) and the same ablation rows.
 _OCC_SMALL = ('configs/occ_cyl/'
               'occcyl_small_1xb1-12e_surroundocc-nus-synthetic.py')
+_OCC_SMALL_SEG2D = ('configs/occ_cyl/'
+                    'occcyl-seg2d_small_1xb1-12e_surroundocc-nus-synthetic.py')
 _SDG_SMALL = 'configs/sdg_occ/sdgocc-{}_small_1xb1-20e_occ3d-nus-synthetic.py'
 RUNS.update({
     'occcyl-small': (_OCC_SMALL, []),
     'occcyl-small-nodepthsup': (_OCC_SMALL, ['model.loss_depth=None']),
+    # Not in the paper: SDG-OCC's 2-D semantic target for the image branch
+    # (the config's header says why), with and without depth supervision.
+    'occcyl-small-seg2d': (_OCC_SMALL_SEG2D, []),
+    'occcyl-small-seg2d-nodepthsup': (_OCC_SMALL_SEG2D,
+                                      ['model.loss_depth=None']),
     'sdg-fusion-small': (_SDG_SMALL.format('fusion'), []),
     'sdg-kl-small': (_SDG_SMALL.format('kl'), []),
     'sdg-camera-lss-small': (_SDG_SMALL.format('fusion'), _CAMERA_LSS),

@@ -77,8 +77,13 @@ class OccCylindrical(BaseOccDetector):
         loss_depth (dict, optional): Depth loss (``DepthBCELoss``); None
             removes the depth supervision (Table V). Defaults to None.
         **kwargs: ``empty_index``, ``ignore_index``, ``loss_mask_key``,
+            ``loss_seg``, ``seg_empty_label``, ``pretrained``,
             ``data_preprocessor`` and ``init_cfg`` of
-            :class:`BaseOccDetector`.
+            :class:`BaseOccDetector`. ``loss_seg`` (not in the paper, whose
+            image backbone is ImageNet-pretrained) trains the DepthNet's
+            semantic head (``seg_channels``) on the LiDAR's projected
+            lidarseg labels, as SDG-OCC does; it needs a train pipeline
+            with ``gt_seg_2d``.
     """
 
     def __init__(self,
@@ -127,6 +132,9 @@ class OccCylindrical(BaseOccDetector):
         for child in (self.depth_net, self.loss_depth):
             if child is not None:
                 self.check_child(child, depth_bound=self.depth_bound)
+        if self.loss_seg is not None and self.depth_net.seg_channels < 1:
+            raise ValueError('OccCylindrical: loss_seg needs a DepthNet '
+                             'with seg_channels > 0')
         if self.depth_net.num_depth_bins != num_bins:
             raise ValueError(
                 f'OccCylindrical: depth_bound {self.depth_bound} gives '
@@ -160,7 +168,9 @@ class OccCylindrical(BaseOccDetector):
 
         Returns:
             dict: ``logits`` (list per scale, finest first, each
-            Shape (B, K, X_l, Y_l, Z_l)) and ``depth`` Shape (B*N, D, h, w).
+            Shape (B, K, X_l, Y_l, Z_l)), ``depth`` Shape (B*N, D, h, w)
+            and, with a semantic head, ``seg_logits`` Shape
+            (B*N, seg_channels, h, w).
         """
         imgs = batch_inputs_dict.get('imgs')
         points = batch_inputs_dict.get('points')
@@ -198,7 +208,10 @@ class OccCylindrical(BaseOccDetector):
         planes = self.tpv_fusion(depth, context, cam_points, lidar_feats,
                                  [p[:, :3] for p in points])
         logits = self.occ_head(self.tpv_encoder(planes))
-        return dict(logits=logits, depth=depth)
+        result = dict(logits=logits, depth=depth)
+        if 'seg_logits' in out:
+            result['seg_logits'] = out['seg_logits']
+        return result
 
     def _inside(self, points: Tensor) -> Tensor:
         """Keep the points that reach a voxel (all finite ones when the
@@ -208,13 +221,14 @@ class OccCylindrical(BaseOccDetector):
 
     def loss(self, batch_inputs_dict: dict,
              batch_data_samples: List[Det3DDataSample]) -> Dict[str, Tensor]:
-        """Eq. 19: multi-scale occupancy loss plus the depth loss.
+        """Eq. 19: multi-scale occupancy loss plus the depth loss (and
+        ``loss_seg`` where configured).
 
         Args:
             batch_inputs_dict (dict): See :meth:`extract_feat`.
             batch_data_samples (list[Det3DDataSample]): With ``gt_occ``
-                Shape (X, Y, Z) and, for the depth loss, ``gt_depth``
-                Shape (N, H, W).
+                Shape (X, Y, Z) and, for the depth and semantic losses,
+                ``gt_depth`` Shape (N, H, W) (and ``gt_seg_2d``).
 
         Returns:
             dict[str, Tensor]: Loss terms.
@@ -223,10 +237,14 @@ class OccCylindrical(BaseOccDetector):
         device = out['depth'].device
         losses = self.occ_head.loss(
             out['logits'], self.occupancy_targets(batch_data_samples, device))
-        if self.loss_depth is not None:
+        if self.loss_depth is not None or self.loss_seg is not None:
+            imgs = batch_inputs_dict['imgs']
             gt_depth = self.gt_depth(batch_data_samples, device,
-                                     batch_inputs_dict['imgs'].shape[-2:])
+                                     imgs.shape[-2:])
             losses.update(self.depth_losses(out['depth'], gt_depth))
+            losses.update(
+                self.seg_losses(out, batch_data_samples, gt_depth,
+                                imgs.shape[-1] // out['depth'].shape[-1]))
         return losses
 
     def predict(self, batch_inputs_dict: dict,

@@ -4,6 +4,7 @@ Importing this package registers ``SDGViewTransform``,
 ``NeighborhoodFusion``, ``FOADDistillLoss``, ``SDGBEVEncoder``,
 ``ChannelToHeightHead`` and ``SDGOcc`` in mmdet3d's ``MODELS`` registry.
 """
+from ..occ_common.geometry.seg_targets import downsample_seg_labels
 from .bev_encoder import SDGBEVEncoder
 from .bev_pool import (BEVPoolIndexCache, BEVPoolIndices, bev_pool,
                        bev_pool_indices, bev_pool_mask)
@@ -15,7 +16,6 @@ from .neighborhood_fusion import (NeighborhoodFusion, neighborhood_attention,
 from .sdg_occ import SDGOcc
 from .sdg_view_transform import (SDGViewTransform, key_frame_points,
                                  points_to_depth_maps)
-from .seg_targets import downsample_seg_labels
 from .semantic_diffusion import semantic_depth_diffusion
 from .virtual_points import (bilinear_incremental_discretization,
                              interpolate_depth_prob, virtual_point_depths,

@@ -38,7 +38,6 @@ from torch import Tensor, nn
 
 from projects.occ_common.models.detectors import BaseOccDetector
 from .c2h_head import height_logits_to_xyz
-from .seg_targets import downsample_seg_labels
 from .temporal_fusion import (FrameBEVCache, TemporalBEVFusion, frame_points,
                               frame_samples)
 
@@ -154,12 +153,13 @@ class SDGOcc(BaseOccDetector):
             num_classes,
             depth_bound=depth_bound,
             loss_depth=loss_depth,
+            loss_seg=loss_seg,
+            seg_empty_label=seg_empty_label,
             **kwargs)
         self._check_variant(variant, lidar_encoder, fusion, loss_distill)
         self.variant = variant
         self.downsample = int(downsample)
         self.teacher_loss_weight = float(teacher_loss_weight)
-        self.seg_empty_label = seg_empty_label
         bev_shape = (self.occ_shape[1], self.occ_shape[0])  # (Y, X)
         grid = dict(
             point_cloud_range=self.point_cloud_range, bev_shape=bev_shape)
@@ -216,7 +216,6 @@ class SDGOcc(BaseOccDetector):
             self.check_child(self.fusion,
                              **self._fusion_channels(cam_channels))
         self.loss_distill = self.build_child(loss_distill)
-        self.loss_seg = self.build_child(loss_seg)
         for child in (self.depth_net, self.view_transform, self.loss_depth):
             if child is not None:
                 self.check_child(child, depth_bound=self.depth_bound)
@@ -459,28 +458,6 @@ class SDGOcc(BaseOccDetector):
     # ------------------------------------------------------------------
     # mmengine contract
     # ------------------------------------------------------------------
-    def seg_targets(self, data_samples: Sequence,
-                    gt_depth: Tensor) -> Tensor:
-        """2D semantic targets at feature resolution.
-
-        The label of the nearest labelled LiDAR return of each feature cell
-        (:func:`downsample_seg_labels`); cells without one get
-        ``seg_empty_label`` (by default the ignore label 255).
-
-        Args:
-            data_samples (Sequence[Det3DDataSample]): With ``gt_seg_2d``
-                Shape (N, H, W).
-            gt_depth (Tensor): From :meth:`gt_depth`. Shape (B * N, H, W).
-
-        Returns:
-            Tensor: Long labels. Shape (B * N, H / s, W / s).
-        """
-        gt_seg = self.stack_field(data_samples, 'gt_seg_2d',
-                                  gt_depth.device).flatten(0, 1)
-        return downsample_seg_labels(
-            gt_seg, gt_depth, self.downsample,
-            empty_label=self.seg_empty_label)
-
     def _aux_losses(self, depth_out: Dict[str, Tensor],
                     data_samples: Sequence, device) -> Dict[str, Tensor]:
         """Depth and 2D semantic losses of the DepthNet."""
@@ -489,15 +466,9 @@ class SDGOcc(BaseOccDetector):
             return losses
         gt_depth = self.gt_depth(data_samples, device)
         losses.update(self.depth_losses(depth_out['depth'], gt_depth))
-        if self.loss_seg is not None:
-            if 'seg_logits' not in depth_out:
-                raise ValueError('SDGOcc: loss_seg needs a DepthNet with '
-                                 'seg_channels > 0')
-            target = self.seg_targets(data_samples, gt_depth)
-            logits = depth_out['seg_logits']
-            losses['loss_seg'] = self.loss_seg(
-                logits.permute(0, 2, 3, 1).reshape(-1, logits.shape[1]),
-                target.reshape(-1))
+        losses.update(
+            self.seg_losses(depth_out, data_samples, gt_depth,
+                            self.downsample))
         return losses
 
     def loss(self, inputs: dict, data_samples: Sequence) -> Dict[str, Tensor]:

@@ -250,3 +250,72 @@ def test_bad_inputs_raise():
     }
     with pytest.raises(ValueError, match="'cam2img'"):
         model.predict(data['inputs'], [Det3DDataSample(metainfo=meta)])
+
+
+#: A semantic head of 3 classes on the DepthNet and its loss (not in the
+#: paper; the seg2d synthetic config).
+SEG = dict(
+    depth_net=dict(seg_channels=3),
+    loss_seg=dict(type='mmdet.CrossEntropyLoss', ignore_index=255,
+                  avg_non_ignore=True, loss_weight=0.5))
+
+
+def _seg_data(model):
+    """One sample whose 2-D labels are 1 where a return is nearer than 6
+    m, 2 beyond, 255 where there is none."""
+    data = _data(model, True, num_points=(200, ))
+    for sample in data['data_samples']:
+        depth = sample.gt_depth
+        sample.gt_seg_2d = torch.where(
+            depth > 0, torch.where(depth <= 6, 1, 2), 255).to(torch.uint8)
+    return data
+
+
+def test_semantic_loss_reaches_the_seg_head_with_its_weight():
+    """loss_seg is 0.5 x the cross-entropy of the DepthNet's seg_logits
+    against the nearest labelled return of each 16x16 cell (computed here
+    from the same tensors); its gradient reaches the seg head and the
+    image encoder, and weight 1.0 doubles both loss and gradient."""
+    from projects.occ_common.geometry import downsample_seg_labels
+    grads, values = {}, {}
+    for weight in (0.5, 1.0):
+        model = _build(depth_net=SEG['depth_net'],
+                       loss_seg=dict(SEG['loss_seg'], loss_weight=weight))
+        data = _seg_data(model)
+        losses = model(**data, mode='loss')
+        assert 'loss_seg' in losses and 'loss_depth' in losses
+        out = model.extract_feat(data['inputs'], data['data_samples'])
+        gt_depth = model.gt_depth(data['data_samples'], torch.device('cpu'),
+                                  data['inputs']['imgs'].shape[-2:])
+        gt_seg = torch.stack([s.gt_seg_2d for s in data['data_samples']
+                              ]).flatten(0, 1)
+        target = downsample_seg_labels(gt_seg, gt_depth, 16)
+        logits = out['seg_logits'].permute(0, 2, 3, 1).reshape(-1, 3)
+        expected = weight * torch.nn.functional.cross_entropy(
+            logits, target.reshape(-1), ignore_index=255)
+        assert (target != 255).sum() > 0
+        torch.testing.assert_close(losses['loss_seg'], expected)
+        model.zero_grad()
+        losses['loss_seg'].backward()
+        head = model.depth_net.seg_head[-1].weight.grad
+        encoder = [p.grad for p in model.img_encoder.parameters()
+                   if p.grad is not None]
+        assert head.abs().sum() > 0 and encoder
+        assert sum(g.abs().sum() for g in encoder) > 0
+        grads[weight], values[weight] = head.clone(), losses['loss_seg']
+    torch.testing.assert_close(values[1.0], 2 * values[0.5])
+    torch.testing.assert_close(grads[1.0], 2 * grads[0.5])
+
+
+def test_seg_head_without_its_loss_gets_no_gradient_and_loss_needs_head():
+    """Without loss_seg the seg head takes no part in the loss; loss_seg
+    without a seg head is refused when the model is built."""
+    model = _build(depth_net=SEG['depth_net'])
+    data = _seg_data(model)
+    losses = model(**data, mode='loss')
+    assert 'loss_seg' not in losses
+    sum(losses.values()).backward()
+    assert model.depth_net.seg_head[-1].weight.grad is None
+    with pytest.raises(ValueError, match='loss_seg needs a DepthNet with '
+                       'seg_channels > 0'):
+        _build(loss_seg=SEG['loss_seg'])

@@ -462,7 +462,7 @@ def test_seg_targets_ignore_cells_without_a_labelled_return():
     model = _model('fusion')
     inputs, samples = _batch()
     gt_depth = model.gt_depth(samples, torch.device('cpu'))
-    target = model.seg_targets(samples, gt_depth)
+    target = model.seg_targets(samples, gt_depth, model.downsample)
     assert target.shape == (4, 2, 4)
     assert set(target.unique().tolist()) <= {1, 2, 255}
     no_return = gt_depth.view(4, 2, 16, 4, 16).amax((2, 4)) == 0

@@ -228,6 +228,7 @@ _CAMERA_OFF = dict(variant='camera', lidar_encoder=None, fusion=None,
 @pytest.mark.parametrize('name, expect', [
     ('occcyl-tiny-nodepthsup', dict(loss_depth=None)),
     ('occcyl-small-nodepthsup', dict(loss_depth=None)),
+    ('occcyl-small-seg2d-nodepthsup', dict(loss_depth=None)),
     ('sdg-camera-lss-tiny', _CAMERA_OFF),
     ('sdg-camera-lss-small', _CAMERA_OFF),
     ('sdg-camera-sdg-small',

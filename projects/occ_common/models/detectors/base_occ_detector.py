@@ -8,7 +8,8 @@ occupancy model of this library, so that it is written once:
   supervision mask (``loss_mask_key``). A subclass hands them to the
   children that need them (see :meth:`BaseOccDetector.head_defaults`), so a
   config states them once, at the top of ``model``;
-* the depth bins (``depth_bound``) and the LiDAR depth loss ``loss_depth``;
+* the depth bins (``depth_bound``), the LiDAR depth loss ``loss_depth``
+  and the DepthNet's optional 2-D semantic loss ``loss_seg``;
 * reading the data samples: stacked metainfo matrices, camera parameters,
   ground-truth fields and the occupancy targets, masked in one place;
 * pretrained weights of its parts (``pretrained``), loaded and checked by
@@ -26,6 +27,7 @@ from mmdet3d.utils import OptConfigType, OptMultiConfig
 from torch import Tensor, nn
 
 from ...geometry.depth import num_depth_bins
+from ...geometry.seg_targets import downsample_seg_labels
 from ..layers.camera_geometry import camera_parameter_vector, lidar2img_matrix
 from ..pretrained import check_entries, load_pretrained
 
@@ -52,6 +54,14 @@ class BaseOccDetector(Base3DDetector):
             to every module that lifts or predicts depth. Defaults to None.
         loss_depth (dict, optional): Depth loss (``DepthBCELoss``); None
             removes the depth supervision. Defaults to None.
+        loss_seg (dict, optional): 2-D semantic loss of the DepthNet's
+            ``seg_logits`` on (N, C) logits and (N,) labels, e.g.
+            ``mmdet.CrossEntropyLoss`` with ``ignore_index=255``; its
+            targets are the LiDAR's projected lidarseg labels
+            (``gt_seg_2d``, see :meth:`seg_targets`). Defaults to None.
+        seg_empty_label (int, optional): 2-D semantic target of feature
+            cells that no labelled LiDAR return hits; None (the default)
+            leaves them unsupervised (label 255).
         pretrained (dict, optional): Entry name -> where and what to load
             (``module`` path, ``checkpoint``, ...; see
             :mod:`projects.occ_common.models.pretrained`), applied by
@@ -70,6 +80,8 @@ class BaseOccDetector(Base3DDetector):
                  loss_mask_key: Optional[str] = None,
                  depth_bound: Optional[Sequence[float]] = None,
                  loss_depth: OptConfigType = None,
+                 loss_seg: OptConfigType = None,
+                 seg_empty_label: Optional[int] = None,
                  pretrained: Optional[dict] = None,
                  data_preprocessor: OptConfigType = None,
                  init_cfg: OptMultiConfig = None) -> None:
@@ -104,6 +116,8 @@ class BaseOccDetector(Base3DDetector):
             self.depth_bound = tuple(float(v) for v in depth_bound)
         self.loss_depth = self.build_child(loss_depth,
                                            depth_bound=self.depth_bound)
+        self.loss_seg = self.build_child(loss_seg)
+        self.seg_empty_label = seg_empty_label
 
     def init_weights(self) -> None:
         """Initialise every part, then load the ``pretrained`` entries.
@@ -318,6 +332,67 @@ class BaseOccDetector(Base3DDetector):
         if self.loss_depth is None:
             return {}
         return {'loss_depth': self.loss_depth(depth, gt_depth)}
+
+    def seg_targets(self, samples: Sequence[Det3DDataSample],
+                    gt_depth: Tensor, downsample: int) -> Tensor:
+        """2-D semantic targets at feature resolution.
+
+        The label of the nearest labelled LiDAR return of each feature cell
+        (:func:`downsample_seg_labels`); cells without one get
+        ``seg_empty_label`` (by default the ignore label 255).
+
+        Args:
+            samples (Sequence[Det3DDataSample]): With ``gt_seg_2d``
+                Shape (N, H, W).
+            gt_depth (Tensor): From :meth:`gt_depth`. Shape (B * N, H, W).
+            downsample (int): Feature stride.
+
+        Returns:
+            Tensor: Long labels. Shape (B * N, H / s, W / s).
+        """
+        gt_seg = self.stack_field(samples, 'gt_seg_2d',
+                                  gt_depth.device).flatten(0, 1)
+        if gt_seg.shape != gt_depth.shape:
+            # The depth maps are padded to the network input; so are the
+            # labels, with the ignore label.
+            pad_h = gt_depth.shape[-2] - gt_seg.shape[-2]
+            pad_w = gt_depth.shape[-1] - gt_seg.shape[-1]
+            gt_seg = F.pad(gt_seg, (0, pad_w, 0, pad_h), value=255)
+        return downsample_seg_labels(
+            gt_seg, gt_depth, downsample, empty_label=self.seg_empty_label)
+
+    def seg_losses(self, depth_out: Dict[str, Tensor],
+                   samples: Sequence[Det3DDataSample], gt_depth: Tensor,
+                   downsample: int) -> Dict[str, Tensor]:
+        """``loss_seg`` of the DepthNet's semantic logits, if configured.
+
+        Args:
+            depth_out (dict[str, Tensor]): The DepthNet's outputs, with
+                ``seg_logits`` Shape (B * N, C, h, w).
+            samples (Sequence[Det3DDataSample]): With ``gt_seg_2d``.
+            gt_depth (Tensor): From :meth:`gt_depth`. Shape (B * N, H, W).
+            downsample (int): Feature stride (H / h).
+
+        Returns:
+            dict[str, Tensor]: ``{'loss_seg': scalar}`` or empty.
+
+        Raises:
+            ValueError: If ``loss_seg`` is set and the DepthNet has no
+                semantic head.
+        """
+        if self.loss_seg is None:
+            return {}
+        if 'seg_logits' not in depth_out:
+            raise ValueError(f'{type(self).__name__}: loss_seg needs a '
+                             'DepthNet with seg_channels > 0')
+        target = self.seg_targets(samples, gt_depth, downsample)
+        logits = depth_out['seg_logits']
+        return {
+            'loss_seg':
+            self.loss_seg(
+                logits.permute(0, 2, 3, 1).reshape(-1, logits.shape[1]),
+                target.reshape(-1))
+        }
 
     @staticmethod
     def add_pred_occ(samples: Sequence[Det3DDataSample],

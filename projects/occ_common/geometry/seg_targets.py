@@ -5,7 +5,8 @@ the images, so they are as sparse as the LiDAR depth. Downsampling them to
 the 1/16 feature map the way BEVDepth downsamples depth (nearest return of
 each patch, see :func:`projects.occ_common.geometry.depth.patch_min_depth`)
 keeps the label of the surface the camera sees in each patch;
-nearest-neighbour resampling would instead drop most labels.
+nearest-neighbour resampling would instead drop most labels. Both detectors
+train their DepthNet's optional semantic head on these targets.
 """
 from typing import Optional
 
