@@ -28,6 +28,8 @@ LITE = osp.join(CONFIG_DIR,
 TINY = osp.join(CONFIG_DIR, 'occcyl_tiny_1xb1-6e_surroundocc-nus-synthetic.py')
 SMALL = osp.join(CONFIG_DIR,
                  'occcyl_small_1xb1-12e_surroundocc-nus-synthetic.py')
+SEG2D = osp.join(CONFIG_DIR,
+                 'occcyl-seg2d_small_1xb1-12e_surroundocc-nus-synthetic.py')
 
 #: What each config changes in the model of the config it builds on.
 COUPLED = {'point_cloud_range', 'voxel_size', 'num_classes', 'empty_index'}
@@ -58,6 +60,11 @@ DELTAS = {
         'tpv_encoder.neck.out_channels', 'tpv_fusion.cam_channels',
         'tpv_fusion.lidar_channels', 'tpv_fusion.plane_channels'
     }),
+    # Not in the paper: the small model with a 2-D semantic head and loss.
+    SEG2D: (SMALL, {
+        'depth_net.seg_channels', 'loss_seg.type', 'loss_seg.ignore_index',
+        'loss_seg.avg_non_ignore', 'loss_seg.loss_weight'
+    }),
     # Table V (3), VI (2) and VII (3): one knob each.
     'occcyl-nodepthsup': (PAPER, {'loss_depth'}),
     'occcyl-nodepthfeat': (PAPER, {'depth_net.with_depth_feature'}),
@@ -76,15 +83,15 @@ def _name(path):
 
 def test_config_inventory():
     """The paper's config, its Occ3D variant, the lighter model, the tiny
-    and small synthetic configs and the deltas of Tables V (3 files), VI
-    (2) and VII (3)."""
-    assert set(MAIN) == {PAPER, OCC3D, LITE, TINY, SMALL}
-    assert ({_name(p) for p in ABLATIONS} | {PAPER, OCC3D, LITE, SMALL}
-            == set(DELTAS))
+    and small synthetic configs (the small one also with a 2-D semantic
+    target) and the deltas of Tables V (3 files), VI (2) and VII (3)."""
+    assert set(MAIN) == {PAPER, OCC3D, LITE, TINY, SMALL, SEG2D}
+    assert ({_name(p) for p in ABLATIONS}
+            | {PAPER, OCC3D, LITE, SMALL, SEG2D} == set(DELTAS))
 
 
 @pytest.mark.parametrize(
-    'path', [PAPER, OCC3D, LITE, SMALL] + ABLATIONS,
+    'path', [PAPER, OCC3D, LITE, SMALL, SEG2D] + ABLATIONS,
     ids=lambda p: osp.basename(p)[:-3])
 def test_each_delta_changes_only_its_documented_keys(path):
     """Compared with the config it builds on, a config changes exactly the
