@@ -319,3 +319,22 @@ def test_seg_head_without_its_loss_gets_no_gradient_and_loss_needs_head():
     with pytest.raises(ValueError, match='loss_seg needs a DepthNet with '
                        'seg_channels > 0'):
         _build(loss_seg=SEG['loss_seg'])
+
+
+def test_seg_targets_follow_the_padded_depth_maps():
+    """The paper config's 900-row images are padded to 928 rows, and the
+    depth maps with them; the 2-D labels are padded the same way with the
+    ignore label. Here 32 rows padded to 48 at stride 16: the first two
+    target rows equal those of the unpadded maps, the padded third row is
+    all 255 (no return, no label)."""
+    model = _build(**SEG)
+    samples = _seg_data(model)['data_samples']
+    cpu = torch.device('cpu')
+    plain = model.seg_targets(samples, model.gt_depth(samples, cpu), 16)
+    padded = model.seg_targets(samples, model.gt_depth(samples, cpu,
+                                                       (48, 64)), 16)
+    assert tuple(plain.shape) == (2, 2, 4)
+    assert tuple(padded.shape) == (2, 3, 4)
+    assert torch.equal(padded[:, :2], plain)
+    assert (padded[:, 2] == 255).all()
+    assert (plain != 255).any()

@@ -64,8 +64,8 @@ class DepthBinAccuracy:
                 f'{self.num_bins}, h, w) for depth_bound {self.depth_bound},'
                 f' got {tuple(depth.shape)}')
         num, _, feat_h, feat_w = depth.shape
-        stride = gt_depth.shape[-1] // feat_w
-        if (gt_depth.dim() != 3 or gt_depth.shape[0] != num
+        stride = gt_depth.shape[-1] // feat_w if gt_depth.dim() == 3 else 0
+        if (stride < 1 or gt_depth.shape[0] != num
                 or gt_depth.shape[-1] != feat_w * stride
                 or gt_depth.shape[-2] != feat_h * stride):
             raise ValueError(

@@ -168,6 +168,32 @@ def test_nearest_bin_lifts_real_lidar_depths_without_bias(real_info):
     assert float(errors[True].abs().mean()) == pytest.approx(0.247, abs=1e-3)
 
 
+def test_depth_bin_accuracy_of_an_oracle_on_the_real_depths(real_info):
+    """tools/depth_accuracy.py's measure on the real sample's depth maps
+    (the paper's 1 m bins, stride 16), with the one-hot of the nearest
+    bins as the prediction: all 3,856 pixels with a return right (the
+    3,860 of the test above less the 4 whose nearest return lies between
+    50.5 and 51 m, beyond the last bin point's half-bin), and their
+    feature mass 0.247 m from the surface on average, the nearest bin's
+    rounding error of the test above; a uniform prediction puts 1/50 on
+    the right bin."""
+    from projects.occ_common.evaluation import DepthBinAccuracy
+    state = _inputs_dataset(
+        real_info, [dict(type='PointsToDepthMaps')]).prepare_data(0)
+    gt = torch.as_tensor(state['gt_depth']).float()
+    bound = (1.0, 51.0, 1.0)
+    onehot, _ = depth_to_bins(gt, 16, bound, nearest_bin=True)
+    num, height, width = gt.shape[0], gt.shape[1] // 16, gt.shape[2] // 16
+    oracle = onehot.reshape(num, height, width, 50).permute(0, 3, 1, 2)
+    perfect, uniform = DepthBinAccuracy(bound), DepthBinAccuracy(bound)
+    perfect.update(oracle, gt)
+    uniform.update(torch.full_like(oracle, 1 / 50), gt)
+    out = perfect.summary()
+    assert out['cells'] == 3856 and out['top1'] == 100.0
+    assert out['expected_error_m'] == pytest.approx(0.247, abs=1e-3)
+    assert uniform.summary()['prob_true'] == pytest.approx(0.02)
+
+
 TINY = sorted(glob.glob(osp.join(REPO, 'configs', '*', '*_tiny_*.py')))
 #: The label steps of the test pipelines: the sample has no labels.
 LABEL_STEPS = ('LoadOccupancyGT', 'PointsToSemanticMaps')

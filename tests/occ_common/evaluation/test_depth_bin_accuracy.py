@@ -71,5 +71,7 @@ def test_bad_inputs_raise():
         acc.update(depth[:, :3], gt)
     with pytest.raises(ValueError, match='integer stride'):
         acc.update(depth, gt[:, :, :3])
+    with pytest.raises(ValueError, match='integer stride'):
+        acc.update(depth, gt[0])
     with pytest.raises(ValueError, match='no feature pixel'):
         acc.summary()
