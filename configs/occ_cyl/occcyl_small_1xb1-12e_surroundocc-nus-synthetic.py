@@ -1,8 +1,8 @@
 # A small OccCylindrical for the held-out learning benchmark
 # (tools/benchmark_learning.py): the tiny model with a cylinder twice as
-# fine in radius and azimuth, twice the image side, finer depth bins and
-# twice the widths, trained with a warm-up and a cosine decay, sized so that
-# 2 CPU cores train it in about an hour.
+# fine in radius and azimuth, twice the image side, finer depth bins, twice
+# the widths and a GroupNorm image branch, trained with a warm-up and a
+# cosine decay, sized so that 2 CPU cores train it in about an hour.
 _base_ = ['./occcyl_tiny_1xb1-6e_surroundocc-nus-synthetic.py']
 
 _img_channels = 32
@@ -10,6 +10,22 @@ _context_channels = 16
 _point_channels = 16
 _plane_channels = 32
 _swin_dims = [32, 64, 128, 256]
+# GroupNorm in the image branch, trained from scratch here: not in the
+# paper, whose ImageNet-pretrained ResNet keeps its BN statistics frozen
+# (norm_eval=True). A trained BN normalises each training step by the
+# statistics of its 6 views, all of one scene, and the test by running
+# means over the training scenes, which miss a held-out scene's weather
+# and light. With BN, the trained occcyl-small-seg2d (issue 14, second
+# seed) scored 70.36 / 29.37 IoU / mIoU on the held-out scenes and 71.76 /
+# 31.93 when the image branch normalised each test sample by its own
+# statistics; an image branch trained on the 2-D semantic target alone
+# (600 iterations) labelled 86.8 % of the training scenes' feature cells
+# right with batch statistics, 54.1 % with the running ones. GN (8 groups)
+# normalises each view by itself, alike in training and test: at 1664
+# iterations occcyl-small went from 67.96 / 27.22 to 71.87 / 32.49 and
+# its ablation without depth supervision from 67.74 / 28.46 to 71.01 /
+# 32.63 (seed 0).
+_img_norm = dict(type='GN', num_groups=8)
 
 model = dict(
     # 2.5 m bins (20 bins at 1, 3.5, ..., 48.5 m).
@@ -20,14 +36,16 @@ model = dict(
     # mIoU, issue 14's benchmark).
     cylinder=dict(shape=[64, 128, 16]),
     img_encoder=dict(
-        backbone=dict(base_channels=16),
+        backbone=dict(base_channels=16, norm_cfg=_img_norm),
         neck=dict(in_channels=[16, 32, 64, 128], out_channels=_img_channels),
         neck_channels=_img_channels,
-        out_channels=_img_channels),
+        out_channels=_img_channels,
+        norm_cfg=_img_norm),
     depth_net=dict(
         in_channels=_img_channels,
         mid_channels=_img_channels,
-        context_channels=_context_channels),
+        context_channels=_context_channels,
+        norm_cfg=_img_norm),
     # Two layers in each point MLP, as the base's (the tiny config has
     # one).
     point_branch=dict(
@@ -47,11 +65,11 @@ model = dict(
     occ_head=dict(
         in_channels=_plane_channels, hidden_channels=_plane_channels))
 # The depth loss keeps the paper's weight 3 (eq. 19, from the base). With
-# this from-scratch image branch it leaves the cameras no use in the
-# benchmark's hour: mean images instead of the real ones score the same
+# the BN image branch of before, it left the cameras no use in the
+# benchmark's hour: mean images instead of the real ones scored the same
 # (65.2 / 20.3 against 65.1 / 20.1 IoU / mIoU), while at weight 0.3 the
-# cameras add 2.2 mIoU (66.4 / 24.4) and without the loss 6.4 (67.1 /
-# 25.9); see README, "Do the models learn?".
+# cameras added 2.2 mIoU (66.4 / 24.4) and without the loss 6.4 (67.1 /
+# 25.9); with GN the two tie (above); see README, "Do the models learn?".
 
 # 192x320 images: a 12x20 feature map (the tiny config's is 6x10).
 img_size = (192, 320)

@@ -46,10 +46,15 @@ DELTAS = {
         'tpv_encoder.backbone.drop_path_rate'
     }),
     # The learning benchmark's small model: the tiny one with a finer
-    # cylinder and depth bins and twice the widths.
+    # cylinder and depth bins, twice the widths and a GroupNorm image
+    # branch.
     SMALL: (TINY, {
         'cylinder.shape', 'depth_bound', 'depth_net.context_channels',
         'depth_net.in_channels', 'depth_net.mid_channels',
+        'depth_net.norm_cfg.type', 'depth_net.norm_cfg.num_groups',
+        'img_encoder.backbone.norm_cfg.type',
+        'img_encoder.backbone.norm_cfg.num_groups',
+        'img_encoder.norm_cfg.type', 'img_encoder.norm_cfg.num_groups',
         'img_encoder.backbone.base_channels', 'img_encoder.neck.in_channels',
         'img_encoder.neck.out_channels', 'img_encoder.neck_channels',
         'img_encoder.out_channels', 'occ_head.hidden_channels',
