@@ -7,6 +7,7 @@ training scenes; a held-out scene's weather and light then meet statistics
 it was not trained with. The small config's GroupNorm has no running
 statistics: a view's features depend on that view only.
 """
+import math
 import os.path as osp
 
 import pytest
@@ -34,20 +35,18 @@ def views():
 
 
 def _image_branch(config):
-    """The config's ``img_encoder`` and ``depth_net`` in training mode,
-    the DepthNet's BN1d of the camera parameters in test mode (it
-    normalises the rig's intrinsics and extrinsics, which every scene
-    shares)."""
+    """The config's ``img_encoder`` and ``depth_net``."""
     init_default_scope('mmdet3d')
     torch.manual_seed(0)
     model = MODELS.build(Config.fromfile(config).model)
-    model.train()
-    model.depth_net.cam_param_norm.eval()
     return model.img_encoder, model.depth_net
 
 
 def _features(encoder, depth_net, imgs, train):
-    """View 0's context features and depth from 6 views at stride 16.
+    """View 0's context features and depth from 6 views at stride 16, in
+    training (``train``) or test mode; the DepthNet's BN1d of the camera
+    parameters stays in test mode (it normalises the rig's intrinsics and
+    extrinsics, which every scene shares).
 
     Returns:
         tuple[Tensor]: Shapes (C, h, w) and (D, h, w).
@@ -60,9 +59,7 @@ def _features(encoder, depth_net, imgs, train):
         feats = encoder(imgs)
         # Any fixed position embedding (it depends on the rig only).
         shape = (6, depth_net.position_channels, *feats.shape[-2:])
-        pos_embed = torch.linspace(-1.0, 1.0,
-                                   shape[0] * shape[1] * shape[2] * shape[3])
-        pos_embed = pos_embed.reshape(shape)
+        pos_embed = torch.linspace(-1.0, 1.0, math.prod(shape)).reshape(shape)
         out = depth_net(feats, pos_embed, cam_params)
     return out['context'][0], out['depth'][0]
 
