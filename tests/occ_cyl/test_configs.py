@@ -46,8 +46,8 @@ DELTAS = {
         'tpv_encoder.backbone.drop_path_rate'
     }),
     # The learning benchmark's small model: the tiny one with a finer
-    # cylinder and depth bins, twice the widths and a GroupNorm image
-    # branch.
+    # cylinder and depth bins, twice the widths, a GroupNorm image branch
+    # and a TPV encoder whose finest level keeps the cylinder's cells.
     SMALL: (TINY, {
         'cylinder.shape', 'depth_bound', 'depth_net.context_channels',
         'depth_net.in_channels', 'depth_net.mid_channels',
@@ -61,7 +61,8 @@ DELTAS = {
         'occ_head.in_channels', 'point_branch.geo_channels',
         'point_branch.img_channels', 'point_branch.out_channels',
         'tpv_encoder.backbone.embed_dims', 'tpv_encoder.backbone.in_channels',
-        'tpv_encoder.backbone.num_heads', 'tpv_encoder.neck.in_channels',
+        'tpv_encoder.backbone.num_heads', 'tpv_encoder.backbone.patch_size',
+        'tpv_encoder.backbone.strides', 'tpv_encoder.neck.in_channels',
         'tpv_encoder.neck.out_channels', 'tpv_fusion.cam_channels',
         'tpv_fusion.lidar_channels', 'tpv_fusion.plane_channels'
     }),
