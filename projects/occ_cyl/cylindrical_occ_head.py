@@ -273,10 +273,25 @@ class CylindricalOccHead(BaseModule):
         Returns:
             Tensor: Shape (B, num_classes, X_l, Y_l, Z_l).
         """
-        feats = sample_tpv_planes(planes, getattr(self, f'columns_{level}'),
-                                  getattr(self, f'heights_{level}'),
-                                  self.wrap)
-        out = self.classifiers[level](feats)
+        first, activation, last = self.classifiers[level]
+        # The MLP's first layer is linear and eq. 17 a weighted sum, so the
+        # two commute: each plane is projected to the hidden width first
+        # (a few thousand cells), then sampled. The bias goes into the
+        # (R, Theta) plane's cells, whose 4 bilinear weights sum to 1 at
+        # every voxel, so each voxel gets it once. The same logits as
+        # classifying the summed samples (up to float rounding), without a
+        # (C x hidden) product and a bias per voxel: at 200 x 200 x 16
+        # voxels and hidden 128 the product was 2.6 GMAC per forward.
+        projected = [
+            torch.einsum('hc,bc...->bh...', first.weight, plane)
+            for plane in planes
+        ]
+        projected[0] = projected[0] + first.bias.view(-1, 1, 1)
+        hidden = sample_tpv_planes(projected,
+                                   getattr(self, f'columns_{level}'),
+                                   getattr(self, f'heights_{level}'),
+                                   self.wrap)
+        out = last(activation(hidden))
         return out.transpose(1, 2).reshape(out.shape[0], self.num_classes,
                                            *self.scale_shapes[level])
 
