@@ -120,10 +120,11 @@ train_cfg = dict(max_epochs=max_epochs, val_interval=max_epochs)
 # The tiny config's lr 2e-3 after a 50-iteration linear warm-up (without
 # it the first iterations' loss rises at 64 x 128), decayed to 0 by a
 # cosine over the run. Twice that (--cfg-options
-# optim_wrapper.optimizer.lr=4e-3) scored 73.26 / 36.43 IoU / mIoU on
-# issue 14's benchmark against 71.26 / 34.62 (seed 0, 1531 and 1528
-# iterations); it stays 2e-3 until the demo, which trains this config 144
-# iterations, and the depth ablation have been measured with it.
+# optim_wrapper.optimizer.lr=4e-3) scored 73.26 / 36.43 and 71.80 /
+# 35.20 IoU / mIoU on issue 14's benchmark against 71.26 / 34.62 and
+# 72.17 / 33.26 (seeds 0 and 1, 1531-1588 iterations each); it stays
+# 2e-3 until the demo, which trains this config 144 iterations, and the
+# depth ablation have been measured with it.
 param_scheduler = [
     dict(type='LinearLR', start_factor=0.1, by_epoch=False, begin=0,
          end=50),
