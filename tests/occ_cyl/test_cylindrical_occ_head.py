@@ -143,9 +143,10 @@ def test_head_projects_before_sampling_with_the_mlp_on_the_sum():
         got = head(planes)
         for level, (x, lvl) in enumerate(zip(got, planes)):
             shape = head.scale_shapes[level]
+            columns = getattr(head, f'columns_{level}')
+            heights = getattr(head, f'heights_{level}')
             expected = head.classifiers[level](
-                sample_tpv_planes(lvl, getattr(head, f'columns_{level}'),
-                                  getattr(head, f'heights_{level}'), True))
+                sample_tpv_planes(lvl, columns, heights, head.wrap))
             expected = expected.transpose(1, 2).reshape(2, 4, *shape)
             torch.testing.assert_close(x, expected, rtol=1e-12, atol=1e-12)
             params = list(lvl) + list(head.classifiers[level].parameters())
