@@ -19,6 +19,7 @@ Example::
         --hidden 32 128 --rounds 7
 """
 import argparse
+import contextlib
 import json
 import statistics
 import types
@@ -99,6 +100,18 @@ def random_planes(model, batch: int) -> List[Tuple[Tensor, ...]]:
     ]
 
 
+@contextlib.contextmanager
+def old_order(head):
+    """Within the block, ``head`` runs :func:`classify_the_sum` in place of
+    its own ``_scale_logits`` (an instance attribute shadows the method;
+    a checkpointed backward recomputes with the function it was given)."""
+    head._scale_logits = types.MethodType(classify_the_sum, head)
+    try:
+        yield head
+    finally:
+        del head._scale_logits
+
+
 def measure(model, planes, rounds: int) -> Dict[str, dict]:
     """Time both orders of ``model.occ_head`` in alternating rounds.
 
@@ -108,31 +121,24 @@ def measure(model, planes, rounds: int) -> Dict[str, dict]:
         difference of the two orders; ``voxels``: finest-scale voxels.
     """
     head = model.occ_head
+    grads = list(head.parameters()) + [p for lvl in planes for p in lvl]
 
-    def step(order: str):
+    def step(old: bool):
 
         def run():
-            if order == 'summed':
-                head._scale_logits = types.MethodType(classify_the_sum, head)
-            try:
+            with old_order(head) if old else contextlib.nullcontext():
                 logits = head(planes)
-            finally:
-                head.__dict__.pop('_scale_logits', None)
             sum(x.square().mean() for x in logits).backward()
-            for param in list(head.parameters()) + [
-                    p for level in planes for p in level
-            ]:
+            for param in grads:
                 param.grad = None
-            return logits
 
         return run
 
-    calls = dict(projected=step('projected'), summed=step('summed'))
+    calls = dict(projected=step(False), summed=step(True))
     with torch.no_grad():
-        head._scale_logits = types.MethodType(classify_the_sum, head)
-        summed = head(planes)
-        del head._scale_logits
         projected = head(planes)
+        with old_order(head):
+            summed = head(planes)
     diff = max((a - b).abs().max().item()
                for a, b in zip(projected, summed))
     times = alternating_runs(calls, rounds, warmup=1)

@@ -4,10 +4,11 @@
 
 1. generates the synthetic nuScenes-format world (unless it exists),
 2. converts it with ``tools/create_data.py`` (through nuscenes-devkit),
-3. for the tiny OccCylindrical and the tiny SDG-Fusion config: evaluates the
-   untrained model, trains it with ``tools/train.py`` and evaluates the
-   trained checkpoint with ``tools/test.py --show-dir`` (pictures of
-   prediction against ground truth),
+3. for the small OccCylindrical and the small SDG-Fusion config (``MODELS``):
+   evaluates the untrained model, trains it with ``tools/train.py`` for the
+   demo's epochs and evaluates the trained checkpoint with
+   ``tools/test.py --show-dir`` (pictures of prediction against ground
+   truth),
 4. prints one table (model, IoU, mIoU, per-class IoU, train time) and writes
    it with the pictures to ``--out``.
 
@@ -125,6 +126,15 @@ def schedule_options(config: str, epochs: Optional[int]) -> Tuple[int, list]:
     return epochs, options
 
 
+def selected_models(args: argparse.Namespace) -> list:
+    """The ``MODELS`` entries that ``--models`` names, in ``MODELS``
+    order, each with the epochs to train: ``--epochs`` where given, else
+    the demo's own."""
+    return [(name, config, labels, args.epochs or epochs)
+            for name, config, labels, epochs in MODELS
+            if name in args.models]
+
+
 #: A class of the validation split with at least LARGE_CLASS_VOXELS GT
 #: voxels has been learned when training gained this many IoU points.
 MIN_GAIN = 5.0
@@ -160,11 +170,8 @@ def main(argv=None):
     prepare_world(data_root, log_path, args.scenes, args.samples)
 
     rows = []
-    for name, config, labels, demo_epochs in MODELS:
-        if name not in args.models:
-            continue
-        epochs, schedule = schedule_options(config, args.epochs
-                                            or demo_epochs)
+    for name, config, labels, epochs in selected_models(args):
+        epochs, schedule = schedule_options(config, epochs)
         slug = name.lower().replace('-', '_')
         work = osp.join(out, 'work_dirs', slug)
         shutil.rmtree(work, ignore_errors=True)

@@ -71,3 +71,28 @@ def test_schedule_options_scale_milestones():
     assert cfg.param_scheduler[1].milestones == [10, 12]
     assert cfg.param_scheduler[1].end == 12
     assert cfg.param_scheduler[0].end == 250
+
+
+def test_default_demo_trains_384_and_240_iterations_on_24_samples():
+    """The README's demo schedule: 5 scenes x 6 key frames, of which the
+    converter holds out the last max(1, 5 // 5) = 1 scene, leave 4 x 6 = 24
+    training samples; OccCylindrical's 16 demo epochs are 384 iterations
+    (batch 1) and SDG-Fusion's 10 are 240. Each model gets its own epochs
+    (not its config's 12 and 20); ``--epochs`` overrides them for the
+    models that ``--models`` picks."""
+    from projects.occ_common.datasets.converters.nuscenes_occ_converter \
+        import split_scenes
+    demo = load_tool('demo.py')
+    args = demo.parse_args([])
+    scenes = [f'scene-{i:04d}' for i in range(args.scenes)]
+    split = split_scenes(scenes, 'v1.0-mini', synthetic=True)
+    train_samples = len(split['train']) * args.samples
+    assert train_samples == 24
+    iterations = {}
+    for name, config, _, epochs in demo.selected_models(args):
+        batch = Config.fromfile(config).train_dataloader.batch_size
+        iterations[name] = epochs * train_samples // batch
+    assert iterations == {'OccCylindrical': 384, 'SDG-Fusion': 240}
+    quick = demo.parse_args(['--epochs', '4', '--models', 'SDG-Fusion'])
+    assert [(m[0], m[3]) for m in demo.selected_models(quick)] == [
+        ('SDG-Fusion', 4)]
