@@ -4,6 +4,7 @@ import argparse
 
 from mmengine.config import Config, DictAction
 
+from projects.occ_common.datasets.converters import nuscenes_occ_converter
 from projects.occ_common.testing.tool_logs import load_tool
 
 
@@ -80,12 +81,11 @@ def test_default_demo_trains_384_and_240_iterations_on_24_samples():
     (batch 1) and SDG-Fusion's 10 are 240. Each model gets its own epochs
     (not its config's 12 and 20); ``--epochs`` overrides them for the
     models that ``--models`` picks."""
-    from projects.occ_common.datasets.converters.nuscenes_occ_converter \
-        import split_scenes
     demo = load_tool('demo.py')
     args = demo.parse_args([])
     scenes = [f'scene-{i:04d}' for i in range(args.scenes)]
-    split = split_scenes(scenes, 'v1.0-mini', synthetic=True)
+    split = nuscenes_occ_converter.split_scenes(
+        scenes, 'v1.0-mini', synthetic=True)
     train_samples = len(split['train']) * args.samples
     assert train_samples == 24
     iterations = {}
