@@ -32,6 +32,7 @@ import json
 import math
 import os
 import os.path as osp
+import sys
 import time
 from typing import Dict, List, Optional
 
@@ -154,13 +155,20 @@ def parse_args(argv=None):
     parser.add_argument(
         '--suffix', default='',
         help='appended to every run name, e.g. to keep a variant made with '
-        '--cfg-options beside the original')
+        '--cfg-options beside the original ("--suffix -bs4" works too)')
     parser.add_argument(
         '--retest', action='store_true',
         help='test the last checkpoint of finished runs again (e.g. after '
         'a change of the metric) instead of reusing their results')
     parser.add_argument(
         '--train-one', metavar='SPEC_JSON', help=argparse.SUPPRESS)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    # A suffix usually starts with a dash ("-bs4"), which argparse would
+    # read as an option and refuse; join it to its flag first.
+    for i in range(len(argv) - 1):
+        if argv[i] == '--suffix':
+            argv[i:i + 2] = [f'--suffix={argv[i + 1]}']
+            break
     args = parser.parse_args(argv)
     if not args.train_one and not (args.runs or args.config):
         parser.error('name at least one run (--runs / --config)')

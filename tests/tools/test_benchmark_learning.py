@@ -253,3 +253,17 @@ def test_ablation_runs_switch_their_module_off(name, expect):
     for key, value in expect.items():
         assert cfg.model[key] == value
         assert base.model.get(key) != value
+
+
+@pytest.mark.parametrize('argv', [
+    ['--runs', 'occcyl-small', '--suffix', '-bs4'],
+    ['--suffix', '-bs4', '--runs', 'occcyl-small'],
+    ['--runs', 'occcyl-small', '--suffix=-bs4'],
+])
+def test_suffix_may_start_with_a_dash(argv):
+    """``--suffix -bs4`` names the runs ``occcyl-small-bs4``: argparse alone
+    reads ``-bs4`` as an unknown option and exits ("expected one
+    argument"); the ``=`` form keeps working."""
+    args = _tool().parse_args(argv)
+    assert args.suffix == '-bs4'
+    assert args.runs == ['occcyl-small']
