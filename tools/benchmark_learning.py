@@ -164,9 +164,11 @@ def parse_args(argv=None):
         '--train-one', metavar='SPEC_JSON', help=argparse.SUPPRESS)
     argv = list(sys.argv[1:] if argv is None else argv)
     # A suffix usually starts with a dash ("-bs4"), which argparse would
-    # read as an option and refuse; join it to its flag first.
+    # read as an option and refuse; join it to its flag first. A word that
+    # starts with "--" stays an option: "--suffix --retest" is still an
+    # error, not a suffix.
     for i in range(len(argv) - 1):
-        if argv[i] == '--suffix':
+        if argv[i] == '--suffix' and not argv[i + 1].startswith('--'):
             argv[i:i + 2] = [f'--suffix={argv[i + 1]}']
             break
     args = parser.parse_args(argv)

@@ -21,7 +21,7 @@ import os
 import os.path as osp
 import shutil
 import time
-from typing import Optional, Tuple
+from typing import List
 
 from projects.occ_common.utils.tool_runs import (LARGE_CLASS_VOXELS,
                                                  data_options, format_table,
@@ -96,16 +96,16 @@ def evaluate_untrained(config: str, work_dir: str, *options: str) -> None:
     Runner.from_cfg(cfg).test()
 
 
-def schedule_options(config: str, epochs: Optional[int]) -> Tuple[int, list]:
-    """The epochs to train ``config`` and the ``--cfg-options`` for them.
+def schedule_options(config: str, epochs: int) -> List[str]:
+    """The ``--cfg-options`` that train ``config`` for ``epochs``.
 
     Args:
         config (str): Config path.
-        epochs (int, optional): Epochs to train; None keeps the config's.
+        epochs (int): Epochs to train.
 
     Returns:
-        tuple[int, list[str]]: The epochs, and overrides that set them,
-        validate and checkpoint once at the end, and stretch every LR
+        list[str]: Overrides that set the epochs, validate and checkpoint
+        once at the end, and stretch every LR
         scheduler's times (warm-up, decay) by epochs / the config's epochs
         as the learning benchmark does, so that a shorter run still warms
         up and decays, and a longer one does not train its last epochs at
@@ -114,7 +114,6 @@ def schedule_options(config: str, epochs: Optional[int]) -> Tuple[int, list]:
     from mmengine.config import Config
     cfg = Config.fromfile(config, import_custom_modules=False)
     own = cfg.train_cfg.max_epochs
-    epochs = epochs or own
     options = [
         f'train_cfg.max_epochs={epochs}', f'train_cfg.val_interval={epochs}',
         f'default_hooks.checkpoint.interval={epochs}'
@@ -123,7 +122,7 @@ def schedule_options(config: str, epochs: Optional[int]) -> Tuple[int, list]:
         for key, value in stretched_times(scheduler, epochs / own).items():
             value = str(value).replace(' ', '')  # one shell word a list
             options.append(f'param_scheduler.{i}.{key}={value}')
-    return epochs, options
+    return options
 
 
 def selected_models(args: argparse.Namespace) -> list:
@@ -171,7 +170,7 @@ def main(argv=None):
 
     rows = []
     for name, config, labels, epochs in selected_models(args):
-        epochs, schedule = schedule_options(config, epochs)
+        schedule = schedule_options(config, epochs)
         slug = name.lower().replace('-', '_')
         work = osp.join(out, 'work_dirs', slug)
         shutil.rmtree(work, ignore_errors=True)

@@ -267,3 +267,12 @@ def test_suffix_may_start_with_a_dash(argv):
     args = _tool().parse_args(argv)
     assert args.suffix == '-bs4'
     assert args.runs == ['occcyl-small']
+
+
+def test_suffix_does_not_swallow_the_next_option(capsys):
+    """``--suffix --retest`` (the suffix forgotten) is refused as before
+    rather than naming the runs ``occcyl-small--retest`` and dropping
+    ``--retest``."""
+    with pytest.raises(SystemExit):
+        _tool().parse_args(['--runs', 'occcyl-small', '--suffix', '--retest'])
+    assert 'expected one argument' in capsys.readouterr().err
