@@ -7,13 +7,14 @@ from .frames import PointsToEgoFrame
 from .image_aug import MultiViewImageAug
 from .image_loading import LoadMultiViewImagesOcc
 from .loading import LoadLidarSegLabels, LoadOccupancyGT
+from .photometric import MultiViewPhotoMetric
 from .points_loading import LoadOccPointsFromFile, LoadOccPointsFromMultiSweeps
 from .previous_frames import LoadPreviousKeyFrames
 
 __all__ = [
     'LoadOccPointsFromFile', 'LoadOccPointsFromMultiSweeps',
     'LoadMultiViewImagesOcc', 'LoadOccupancyGT', 'LoadLidarSegLabels',
-    'MultiViewImageAug', 'PointsToDepthMaps', 'PointsToSemanticMaps',
-    'OccBEVAug', 'PointsToEgoFrame', 'PackOccInputs', 'RemoveEgoPoints',
-    'LoadPreviousKeyFrames'
+    'MultiViewImageAug', 'MultiViewPhotoMetric', 'PointsToDepthMaps',
+    'PointsToSemanticMaps', 'OccBEVAug', 'PointsToEgoFrame',
+    'PackOccInputs', 'RemoveEgoPoints', 'LoadPreviousKeyFrames'
 ]
