@@ -1,0 +1,155 @@
+#!/usr/bin/env python
+"""Which ground-truth voxels does the LiDAR see? Per class of a split.
+
+    python tools/lidar_visibility.py CONFIG [--split train] \\
+        [--data-root DIR] [--json OUT.json]
+
+Runs the samples of a split through the config's test pipeline and counts,
+per class: its ground-truth voxels, the share of them that holds at least
+one of the points the model gets (key frame and sweeps, ego returns
+removed), the share within ``--near`` metres of the working frame's origin
+(horizontally) and their mean horizontal range. Every pipeline of this
+library keeps points and grid in one working frame (LiDAR for SurroundOcc,
+ego for Occ3D), so a point's voxel is ``floor((p - range_min) /
+voxel_size)``. A class whose voxels rarely hold a return is one the model
+must infer from the cameras and from shape: issue 14 used it to tell why
+the small OccCylindrical misses bicycles.
+"""
+import argparse
+import json
+from typing import Dict, Sequence
+
+import numpy as np
+from mmengine.config import Config, DictAction
+
+
+def parse_args(argv=None):
+    """Parse the command line."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('config', help='a config of this library')
+    parser.add_argument('--split', choices=('val', 'train'), default='val',
+                        help='the test dataloader\'s samples, or the '
+                        'training set\'s through the test pipeline')
+    parser.add_argument('--data-root', default=None,
+                        help='override the dataset\'s data_root')
+    parser.add_argument('--near', type=float, default=20.0,
+                        help='metres: the "near" share\'s horizontal range')
+    parser.add_argument('--json', default=None, help='write the numbers')
+    parser.add_argument('--cfg-options', nargs='+', action=DictAction,
+                        help='config overrides, as for tools/test.py')
+    return parser.parse_args(argv)
+
+
+def voxel_hits(occ: np.ndarray, points: np.ndarray,
+               range_min: Sequence[float],
+               voxel_size: Sequence[float]) -> np.ndarray:
+    """Which voxels hold at least one point.
+
+    Args:
+        occ (np.ndarray): The label grid. Shape (X, Y, Z).
+        points (np.ndarray): Coordinates first. Shape (P, >= 3).
+        range_min (Sequence[float]): The grid's lower corner (x, y, z).
+        voxel_size (Sequence[float]): (dx, dy, dz).
+
+    Returns:
+        np.ndarray: bool. Shape (X, Y, Z).
+    """
+    index = np.floor((np.asarray(points)[:, :3] - np.asarray(range_min)) /
+                     np.asarray(voxel_size)).astype(np.int64)
+    inside = np.all((index >= 0) & (index < occ.shape), axis=1)
+    hit = np.zeros(occ.shape, bool)
+    hit[tuple(index[inside].T)] = True
+    return hit
+
+
+class VisibilityCount:
+    """Per-label sums over samples: voxels, voxels with a return, voxels
+    within ``near`` metres and their summed horizontal range.
+
+    Args:
+        range_min (Sequence[float]): The grid's lower corner (x, y, z).
+        voxel_size (Sequence[float]): (dx, dy, dz).
+        near (float): Horizontal range of the "near" share, metres.
+    """
+
+    def __init__(self, range_min: Sequence[float],
+                 voxel_size: Sequence[float], near: float) -> None:
+        self.range_min = np.asarray(range_min, np.float64)
+        self.voxel_size = np.asarray(voxel_size, np.float64)
+        self.near = near
+        self.sums = {}
+
+    def update(self, occ: np.ndarray, points: np.ndarray) -> None:
+        """Add one sample: its label grid (X, Y, Z) and points (P, >= 3)."""
+        hit = voxel_hits(occ, points, self.range_min, self.voxel_size)
+        for label in np.unique(occ):
+            where = np.argwhere(occ == label)
+            centre = (where + 0.5) * self.voxel_size + self.range_min
+            radius = np.hypot(centre[:, 0], centre[:, 1])
+            sums = self.sums.setdefault(int(label), np.zeros(4))
+            sums += (len(where), hit[tuple(where.T)].sum(),
+                     (radius < self.near).sum(), radius.sum())
+
+    def summary(self, names: Sequence[str]) -> Dict[str, dict]:
+        """Per label (named by ``names`` where it indexes them, else by
+        its number): ``voxels``, ``with_return`` and ``near`` (%),
+        ``mean_range_m``."""
+        out = {}
+        for label in sorted(self.sums):
+            voxels, hits, near, radius = self.sums[label]
+            name = names[label] if label < len(names) else str(label)
+            out[name] = dict(voxels=int(voxels),
+                             with_return=100 * hits / voxels,
+                             near=100 * near / voxels,
+                             mean_range_m=radius / voxels)
+        return out
+
+
+def measure(cfg: Config, split: str = 'val', data_root: str = None,
+            near: float = 20.0) -> Dict[str, dict]:
+    """:meth:`VisibilityCount.summary` over the samples of ``split``."""
+    from mmengine.registry import DATASETS, init_default_scope
+
+    init_default_scope(cfg.get('default_scope', 'mmdet3d'))
+    ds_cfg = cfg.test_dataloader.dataset.copy()
+    if split == 'train':
+        ds_cfg = dict(cfg.train_dataloader.dataset,
+                      pipeline=ds_cfg['pipeline'], test_mode=True)
+    if data_root is not None:
+        ds_cfg['data_root'] = data_root
+    dataset = DATASETS.build(ds_cfg)
+    count = VisibilityCount(cfg.point_cloud_range[:3], cfg.voxel_size, near)
+    for index in range(len(dataset)):
+        sample = dataset[index]
+        count.update(sample['data_samples'].gt_occ.numpy(),
+                     sample['inputs']['points'].numpy())
+    return count.summary(list(cfg.class_names))
+
+
+def main(argv=None) -> Dict[str, dict]:
+    """Measure and print; returns the numbers."""
+    from mmengine.utils import import_modules_from_strings
+
+    args = parse_args(argv)
+    cfg = Config.fromfile(args.config)
+    if args.cfg_options:
+        cfg.merge_from_dict(args.cfg_options)
+    if cfg.get('custom_imports'):
+        import_modules_from_strings(**cfg.custom_imports)
+    out = measure(cfg, args.split, args.data_root, args.near)
+    print(f'{args.config} ({args.split}): ground-truth voxels per class, '
+          f'the % that hold a LiDAR return, the % within {args.near:g} m, '
+          'the mean range')
+    for name, row in out.items():
+        print(f'  {name:22s} {row["voxels"]:>11,d} '
+              f'{row["with_return"]:6.1f} % {row["near"]:6.1f} % '
+              f'{row["mean_range_m"]:6.1f} m')
+    if args.json:
+        with open(args.json, 'w') as f:
+            json.dump(dict(classes=out, config=args.config,
+                           split=args.split, near_m=args.near), f, indent=1)
+    return out
+
+
+if __name__ == '__main__':
+    main()
