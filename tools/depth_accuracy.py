@@ -22,17 +22,16 @@ from typing import Dict, Optional
 import torch
 from mmengine.config import DictAction
 
+from projects.occ_common.utils.split_dataset import (add_split_arguments,
+                                                     build_split_dataset)
+
 
 def parse_args(argv=None):
     """Parse the command line."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('config', help='model config')
     parser.add_argument('checkpoint', help='trained weights')
-    parser.add_argument('--split', choices=('val', 'train'), default='val',
-                        help='the test dataloader\'s samples, or the '
-                        'training set\'s through the test pipeline')
-    parser.add_argument('--data-root', default=None,
-                        help='override the dataset\'s data_root')
+    add_split_arguments(parser)
     parser.add_argument('--max-samples', type=int, default=None,
                         help='measure only the first N samples')
     parser.add_argument('--device', default='cpu')
@@ -49,19 +48,11 @@ def build(args):
         tuple: ``(model, dataset)``, the model in eval mode on
         ``args.device``.
     """
-    from mmengine.registry import DATASETS
-
     from projects.occ_common.utils import build_trained_model
 
     cfg, model = build_trained_model(args.config, args.checkpoint,
                                      args.cfg_options, args.device)
-    ds_cfg = cfg.test_dataloader.dataset.copy()
-    if args.split == 'train':
-        ds_cfg = dict(cfg.train_dataloader.dataset,
-                      pipeline=ds_cfg['pipeline'], test_mode=True)
-    if args.data_root is not None:
-        ds_cfg['data_root'] = args.data_root
-    return model, DATASETS.build(ds_cfg)
+    return model, build_split_dataset(cfg, args.split, args.data_root)
 
 
 def measure(model, dataset, max_samples: Optional[int] = None

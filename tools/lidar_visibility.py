@@ -22,16 +22,15 @@ from typing import Dict, Sequence
 import numpy as np
 from mmengine.config import Config, DictAction
 
+from projects.occ_common.utils.split_dataset import (add_split_arguments,
+                                                     build_split_dataset)
+
 
 def parse_args(argv=None):
     """Parse the command line."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('config', help='a config of this library')
-    parser.add_argument('--split', choices=('val', 'train'), default='val',
-                        help='the test dataloader\'s samples, or the '
-                        'training set\'s through the test pipeline')
-    parser.add_argument('--data-root', default=None,
-                        help='override the dataset\'s data_root')
+    add_split_arguments(parser)
     parser.add_argument('--near', type=float, default=20.0,
                         help='metres: the "near" share\'s horizontal range')
     parser.add_argument('--json', default=None, help='write the numbers')
@@ -108,16 +107,7 @@ class VisibilityCount:
 def measure(cfg: Config, split: str = 'val', data_root: str = None,
             near: float = 20.0) -> Dict[str, dict]:
     """:meth:`VisibilityCount.summary` over the samples of ``split``."""
-    from mmengine.registry import DATASETS, init_default_scope
-
-    init_default_scope(cfg.get('default_scope', 'mmdet3d'))
-    ds_cfg = cfg.test_dataloader.dataset.copy()
-    if split == 'train':
-        ds_cfg = dict(cfg.train_dataloader.dataset,
-                      pipeline=ds_cfg['pipeline'], test_mode=True)
-    if data_root is not None:
-        ds_cfg['data_root'] = data_root
-    dataset = DATASETS.build(ds_cfg)
+    dataset = build_split_dataset(cfg, split, data_root)
     count = VisibilityCount(cfg.point_cloud_range[:3], cfg.voxel_size, near)
     for index in range(len(dataset)):
         sample = dataset[index]
@@ -128,14 +118,11 @@ def measure(cfg: Config, split: str = 'val', data_root: str = None,
 
 def main(argv=None) -> Dict[str, dict]:
     """Measure and print; returns the numbers."""
-    from mmengine.utils import import_modules_from_strings
-
     args = parse_args(argv)
+    # Config.fromfile imports the config's custom_imports (the plugins).
     cfg = Config.fromfile(args.config)
     if args.cfg_options:
         cfg.merge_from_dict(args.cfg_options)
-    if cfg.get('custom_imports'):
-        import_modules_from_strings(**cfg.custom_imports)
     out = measure(cfg, args.split, args.data_root, args.near)
     print(f'{args.config} ({args.split}): ground-truth voxels per class, '
           f'the % that hold a LiDAR return, the % within {args.near:g} m, '
