@@ -108,11 +108,21 @@ def measure(cfg: Config, split: str = 'val', data_root: str = None,
             near: float = 20.0) -> Dict[str, dict]:
     """:meth:`VisibilityCount.summary` over the samples of ``split``."""
     dataset = build_split_dataset(cfg, split, data_root)
-    count = VisibilityCount(cfg.point_cloud_range[:3], cfg.voxel_size, near)
+    pc_range, voxel_size = cfg.point_cloud_range, cfg.voxel_size
+    grid = tuple(
+        round((pc_range[i + 3] - pc_range[i]) / voxel_size[i])
+        for i in range(3))
+    count = VisibilityCount(pc_range[:3], voxel_size, near)
     for index in range(len(dataset)):
         sample = dataset[index]
-        count.update(sample['data_samples'].gt_occ.numpy(),
-                     sample['inputs']['points'].numpy())
+        occ = sample['data_samples'].get('gt_occ')
+        if occ is None or tuple(occ.shape) != grid:
+            raise ValueError(
+                f'{dataset.ann_file}, sample {index}: expected occupancy '
+                f'labels of shape {grid} (the config\'s range and voxel '
+                'size), got ' +
+                ('none' if occ is None else str(tuple(occ.shape))))
+        count.update(occ.numpy(), sample['inputs']['points'].numpy())
     return count.summary(list(cfg.class_names))
 
 

@@ -70,3 +70,17 @@ def test_command_line_on_the_tiny_world(converted_tiny_world, tmp_path):
     written = json.loads(out_json.read_text())
     assert written['split'] == 'val' and written['near_m'] == 20.0
     assert written['classes']['car'] == pytest.approx(out['car'])
+
+
+def test_labels_of_another_grid_are_refused(converted_tiny_world):
+    """A 0.4 m voxel size makes the config's grid 250 x 250 x 20; the
+    world's labels are 200 x 200 x 16, and the error says which file and
+    sample."""
+    from mmengine.config import Config
+    tool = load_tool('lidar_visibility.py')
+    cfg = Config.fromfile(OCCCYL)
+    cfg.voxel_size = [0.4, 0.4, 0.4]
+    with pytest.raises(ValueError, match=r'nuscenes_occ_infos_val.pkl, '
+                       r'sample 0: expected occupancy labels of shape '
+                       r'\(250, 250, 20\).*got \(200, 200, 16\)'):
+        tool.measure(cfg, data_root=converted_tiny_world)
