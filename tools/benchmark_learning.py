@@ -5,8 +5,10 @@ held-out ones, and draw their learning curves.
         --iters 400 --val-interval 100 --out work_dirs/learning
 
 1. generates (or reuses) a synthetic nuScenes-format world whose last
-   ``--val-scenes`` scenes are the val split (other layouts, other weather
-   and light than the training scenes) and converts it with
+   ``--val-scenes`` scenes are the val split (other layouts; the scenes
+   cycle through clear, rainy night, rain and night, so with the default
+   10 scenes the held-out clear day and rainy night also light two
+   training scenes each) and converts it with
    ``tools/create_data.py``;
 2. trains every named run with ``tools/train.py``'s machinery for a fixed
    budget (``--iters``, or the config's own schedule, optionally capped by
