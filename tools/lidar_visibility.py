@@ -22,8 +22,10 @@ from typing import Dict, Sequence
 import numpy as np
 from mmengine.config import Config, DictAction
 
+from projects.occ_common.transforms.point_labels import point_voxel_index
 from projects.occ_common.utils.split_dataset import (add_split_arguments,
                                                      build_split_dataset)
+from projects.occ_common.visualization.camera_overlay import voxel_centres
 
 
 def parse_args(argv=None):
@@ -40,22 +42,21 @@ def parse_args(argv=None):
 
 
 def voxel_hits(occ: np.ndarray, points: np.ndarray,
-               range_min: Sequence[float],
+               pc_range: Sequence[float],
                voxel_size: Sequence[float]) -> np.ndarray:
     """Which voxels hold at least one point.
 
     Args:
         occ (np.ndarray): The label grid. Shape (X, Y, Z).
         points (np.ndarray): Coordinates first. Shape (P, >= 3).
-        range_min (Sequence[float]): The grid's lower corner (x, y, z).
+        pc_range (Sequence[float]): ``(x0, y0, z0, x1, y1, z1)``.
         voxel_size (Sequence[float]): (dx, dy, dz).
 
     Returns:
         np.ndarray: bool. Shape (X, Y, Z).
     """
-    index = np.floor((np.asarray(points)[:, :3] - np.asarray(range_min)) /
-                     np.asarray(voxel_size)).astype(np.int64)
-    inside = np.all((index >= 0) & (index < occ.shape), axis=1)
+    index, inside = point_voxel_index(
+        np.asarray(points)[:, :3], occ.shape, pc_range, voxel_size)
     hit = np.zeros(occ.shape, bool)
     hit[tuple(index[inside].T)] = True
     return hit
@@ -66,36 +67,48 @@ class VisibilityCount:
     within ``near`` metres and their summed horizontal range.
 
     Args:
-        range_min (Sequence[float]): The grid's lower corner (x, y, z).
+        pc_range (Sequence[float]): ``(x0, y0, z0, x1, y1, z1)``.
         voxel_size (Sequence[float]): (dx, dy, dz).
         near (float): Horizontal range of the "near" share, metres.
     """
 
-    def __init__(self, range_min: Sequence[float],
+    def __init__(self, pc_range: Sequence[float],
                  voxel_size: Sequence[float], near: float) -> None:
-        self.range_min = np.asarray(range_min, np.float64)
-        self.voxel_size = np.asarray(voxel_size, np.float64)
+        self.pc_range = pc_range
+        self.voxel_size = voxel_size
         self.near = near
-        self.sums = {}
+        # Rows: voxels, with a return, near, summed range; column = label.
+        self.sums = np.zeros((4, 0))
+
+    def _radius(self, shape) -> np.ndarray:
+        """Horizontal range of every voxel centre. Shape (X, Y, Z)."""
+        xy = np.stack(np.meshgrid(np.arange(shape[0]), np.arange(shape[1]),
+                                  [0], indexing='ij'), axis=-1)
+        centre = voxel_centres(xy, self.pc_range, self.voxel_size)
+        radius = np.hypot(centre[..., 0], centre[..., 1])
+        return np.broadcast_to(radius, shape)
 
     def update(self, occ: np.ndarray, points: np.ndarray) -> None:
         """Add one sample: its label grid (X, Y, Z) and points (P, >= 3)."""
-        hit = voxel_hits(occ, points, self.range_min, self.voxel_size)
-        for label in np.unique(occ):
-            where = np.argwhere(occ == label)
-            centre = (where + 0.5) * self.voxel_size + self.range_min
-            radius = np.hypot(centre[:, 0], centre[:, 1])
-            sums = self.sums.setdefault(int(label), np.zeros(4))
-            sums += (len(where), hit[tuple(where.T)].sum(),
-                     (radius < self.near).sum(), radius.sum())
+        labels = np.asarray(occ, np.int64).ravel()
+        radius = self._radius(occ.shape).ravel()
+        weights = (None, voxel_hits(occ, points, self.pc_range,
+                                    self.voxel_size).ravel(),
+                   radius < self.near, radius)
+        size = max(labels.max() + 1, self.sums.shape[1])
+        sample = np.stack([
+            np.bincount(labels, weights=w, minlength=size) for w in weights
+        ])
+        self.sums = np.pad(self.sums,
+                           ((0, 0), (0, size - self.sums.shape[1]))) + sample
 
     def summary(self, names: Sequence[str]) -> Dict[str, dict]:
-        """Per label (named by ``names`` where it indexes them, else by
-        its number): ``voxels``, ``with_return`` and ``near`` (%),
-        ``mean_range_m``."""
+        """Per label that has voxels (named by ``names`` where it indexes
+        them, else by its number): ``voxels``, ``with_return`` and
+        ``near`` (%), ``mean_range_m``."""
         out = {}
-        for label in sorted(self.sums):
-            voxels, hits, near, radius = self.sums[label]
+        for label in np.flatnonzero(self.sums[0]):
+            voxels, hits, near, radius = self.sums[:, label]
             name = names[label] if label < len(names) else str(label)
             out[name] = dict(voxels=int(voxels),
                              with_return=100 * hits / voxels,
@@ -108,19 +121,15 @@ def measure(cfg: Config, split: str = 'val', data_root: str = None,
             near: float = 20.0) -> Dict[str, dict]:
     """:meth:`VisibilityCount.summary` over the samples of ``split``."""
     dataset = build_split_dataset(cfg, split, data_root)
-    pc_range, voxel_size = cfg.point_cloud_range, cfg.voxel_size
-    grid = tuple(
-        round((pc_range[i + 3] - pc_range[i]) / voxel_size[i])
-        for i in range(3))
-    count = VisibilityCount(pc_range[:3], voxel_size, near)
+    grid = tuple(cfg.grid_size)
+    count = VisibilityCount(cfg.point_cloud_range, cfg.voxel_size, near)
     for index in range(len(dataset)):
         sample = dataset[index]
         occ = sample['data_samples'].get('gt_occ')
         if occ is None or tuple(occ.shape) != grid:
             raise ValueError(
                 f'{dataset.ann_file}, sample {index}: expected occupancy '
-                f'labels of shape {grid} (the config\'s range and voxel '
-                'size), got ' +
+                f'labels of the config\'s grid_size {grid}, got ' +
                 ('none' if occ is None else str(tuple(occ.shape))))
         count.update(occ.numpy(), sample['inputs']['points'].numpy())
     return count.summary(list(cfg.class_names))

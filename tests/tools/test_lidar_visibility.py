@@ -17,6 +17,7 @@ ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 OCCCYL = osp.join(ROOT, 'configs', 'occ_cyl',
                   'occcyl_tiny_1xb1-6e_surroundocc-nus-synthetic.py')
 OCC = np.array([[1, 2], [2, 0]])[..., None]
+RANGE = (0, 0, 0, 2, 2, 1)
 POINTS = np.array([[0.5, 0.5, 0.5, 7.0], [1.2, 0.1, 0.9, 7.0],
                    [5.0, 5.0, 0.0, 7.0]])
 
@@ -25,7 +26,7 @@ def test_voxel_hits():
     """(0.5, 0.5, 0.5) is in voxel (0, 0, 0), (1.2, 0.1, 0.9) in (1, 0,
     0); (5, 5, 0) is outside and counts nowhere."""
     tool = load_tool('lidar_visibility.py')
-    hit = tool.voxel_hits(OCC, POINTS, (0, 0, 0), (1, 1, 1))
+    hit = tool.voxel_hits(OCC, POINTS, RANGE, (1, 1, 1))
     assert hit[..., 0].tolist() == [[True, False], [True, False]]
 
 
@@ -34,7 +35,7 @@ def test_count_per_label():
     its two voxels (1.58 m each) the one at (1, 0) is hit: 50 %, none
     near. Label 0 ("empty"): not hit, 2.12 m. Label 2 has no name."""
     tool = load_tool('lidar_visibility.py')
-    count = tool.VisibilityCount((0, 0, 0), (1, 1, 1), near=1.0)
+    count = tool.VisibilityCount(RANGE, (1, 1, 1), near=1.0)
     count.update(OCC, POINTS)
     out = count.summary(['empty', 'one'])
     assert list(out) == ['empty', 'one', '2']
@@ -73,14 +74,15 @@ def test_command_line_on_the_tiny_world(converted_tiny_world, tmp_path):
 
 
 def test_labels_of_another_grid_are_refused(converted_tiny_world):
-    """A 0.4 m voxel size makes the config's grid 250 x 250 x 20; the
-    world's labels are 200 x 200 x 16, and the error says which file and
-    sample."""
+    """A config of 0.4 m voxels over the same range (a 250 x 250 x 20
+    grid) on the world's 200 x 200 x 16 labels: the error says which file
+    and sample."""
     from mmengine.config import Config
     tool = load_tool('lidar_visibility.py')
     cfg = Config.fromfile(OCCCYL)
-    cfg.voxel_size = [0.4, 0.4, 0.4]
+    cfg.voxel_size, cfg.grid_size = [0.4, 0.4, 0.4], [250, 250, 20]
     with pytest.raises(ValueError, match=r'nuscenes_occ_infos_val.pkl, '
-                       r'sample 0: expected occupancy labels of shape '
-                       r'\(250, 250, 20\).*got \(200, 200, 16\)'):
+                       r'sample 0: expected occupancy labels of the '
+                       r"config's grid_size \(250, 250, 20\), got "
+                       r'\(200, 200, 16\)'):
         tool.measure(cfg, data_root=converted_tiny_world)

@@ -28,16 +28,38 @@ from ..datasets.occ_formats import IGNORE_INDEX
 FIRST_CLASS, LAST_CLASS = 1, 16
 
 
+def point_voxel_index(xyz: np.ndarray, grid_shape, pc_range: np.ndarray,
+                      voxel_size: np.ndarray) -> tuple:
+    """The voxel each point falls in, and whether it is inside the grid.
+
+    Voxel ``(i, j, k)`` covers ``[lo + i * s, lo + (i + 1) * s)`` per axis
+    (``lo`` the low corner of ``pc_range``, ``s`` the voxel size), the
+    convention of the label files.
+
+    Args:
+        xyz (np.ndarray): Points in the grid's frame. Shape (P, 3).
+        grid_shape (Sequence[int]): ``(X, Y, Z)``.
+        pc_range (np.ndarray): ``(x0, y0, z0, x1, y1, z1)`` of the grid.
+        voxel_size (np.ndarray): Shape (3,), metres.
+
+    Returns:
+        tuple[np.ndarray, np.ndarray]: Indices, int64, shape (P, 3), and
+        the inside mask, bool, shape (P,).
+    """
+    low = np.asarray(pc_range, np.float64)[:3]
+    index = np.floor((np.asarray(xyz, np.float64) - low) /
+                     np.asarray(voxel_size, np.float64)).astype(np.int64)
+    inside = np.all((index >= 0) & (index < np.asarray(grid_shape)), axis=1)
+    return index, inside
+
+
 def occupancy_point_labels(xyz: np.ndarray,
                            gt_occ: np.ndarray,
                            pc_range: np.ndarray,
                            voxel_size: np.ndarray,
                            ignore_index: int = IGNORE_INDEX) -> np.ndarray:
-    """The occupancy label of the voxel each point falls in.
-
-    Voxel ``(i, j, k)`` covers ``[lo + i * s, lo + (i + 1) * s)`` per axis
-    (``lo`` the low corner of ``pc_range``, ``s`` the voxel size), the
-    convention of the label files.
+    """The occupancy label of the voxel each point falls in
+    (:func:`point_voxel_index`).
 
     Args:
         xyz (np.ndarray): Points in the grid's frame. Shape (P, 3).
@@ -51,10 +73,7 @@ def occupancy_point_labels(xyz: np.ndarray,
         np.ndarray: Shape (P,), int64, in 1..16 or ``ignore_index``.
     """
     grid = np.asarray(gt_occ)
-    low = np.asarray(pc_range, np.float64)[:3]
-    index = np.floor((np.asarray(xyz, np.float64) - low) /
-                     np.asarray(voxel_size, np.float64)).astype(np.int64)
-    inside = np.all((index >= 0) & (index < np.array(grid.shape)), axis=1)
+    index, inside = point_voxel_index(xyz, grid.shape, pc_range, voxel_size)
     labels = np.full(len(index), ignore_index, np.int64)
     i, j, k = index[inside].T
     labels[inside] = grid[i, j, k]
