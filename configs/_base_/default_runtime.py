@@ -3,7 +3,10 @@ default_scope = 'mmdet3d'
 
 default_hooks = dict(
     timer=dict(type='IterTimerHook'),
-    logger=dict(type='LoggerHook', interval=50),
+    # mmengine's LoggerHook, but only rank 0 writes the test metrics json:
+    # under dist_test.sh every rank rewrote it at once and could leave it
+    # unparseable; see projects/occ_common/hooks/main_process_logger_hook.py
+    logger=dict(type='MainProcessLoggerHook', interval=50),
     param_scheduler=dict(type='ParamSchedulerHook'),
     # Writes each .pth atomically, reads it back, and only then deletes the
     # oldest: a kill, Ctrl-C or full disk during a save never leaves fewer

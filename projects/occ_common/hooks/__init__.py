@@ -10,6 +10,7 @@ from .augmentation_seed_hook import AugmentationSeedHook
 from .checkpoint_match_hook import CheckpointMatchHook
 from .checkpoint_recovery_hook import CheckpointRecoveryHook
 from .cpu_malloc_tuning_hook import CPUMallocTuningHook
+from .main_process_logger_hook import MainProcessLoggerHook
 from .non_finite_loss_hook import NonFiniteLossError, NonFiniteLossHook
 from .occ_visualization_hook import OccVisualizationHook
 from .safe_checkpoint_hook import SafeCheckpointHook
@@ -17,7 +18,8 @@ from .weights_only_checkpoint_hook import WeightsOnlyCheckpointHook
 
 __all__ = [
     'AtomicLocalBackend', 'AugmentationSeedHook', 'CheckpointMatchHook',
-    'CheckpointRecoveryHook', 'CPUMallocTuningHook', 'NonFiniteLossError',
-    'NonFiniteLossHook', 'OccVisualizationHook', 'SafeCheckpointHook',
-    'WeightsOnlyCheckpointHook', 'atomic_write', 'register_atomic_backend'
+    'CheckpointRecoveryHook', 'CPUMallocTuningHook', 'MainProcessLoggerHook',
+    'NonFiniteLossError', 'NonFiniteLossHook', 'OccVisualizationHook',
+    'SafeCheckpointHook', 'WeightsOnlyCheckpointHook', 'atomic_write',
+    'register_atomic_backend'
 ]
