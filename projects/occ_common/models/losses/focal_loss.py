@@ -2,12 +2,11 @@
 from typing import Optional, Sequence
 
 import torch
-import torch.nn.functional as F
 from mmdet3d.registry import MODELS
 from torch import Tensor
 
 from .occupancy_loss import OccupancyLossTerm
-from .utils import supervised_voxels, zero_with_grad
+from .utils import SupervisedVoxels
 
 
 @MODELS.register_module()
@@ -51,19 +50,14 @@ class OccFocalLoss(OccupancyLossTerm):
                              f'{gamma}.')
         self.gamma = float(gamma)
 
-    def forward(self, logits: Tensor, target: Tensor) -> Tensor:
-        """Focal loss of the supervised voxels (see
-        :class:`~.occupancy_loss.OccupancyLossTerm` for the shapes)."""
-        picked = supervised_voxels(logits, target, self.ignore_index,
-                                   'OccFocalLoss', self.class_weight)
-        if picked is None:
-            return zero_with_grad(logits)
-        scores, labels = picked
-        log_p = F.log_softmax(scores, dim=1).gather(1, labels[:, None])[:, 0]
+    def loss_voxels(self, voxels: SupervisedVoxels) -> Tensor:
+        """Focal loss of the supervised voxels (unweighted)."""
+        labels = voxels.labels
+        log_p = voxels.log_probs.gather(1, labels[:, None])[:, 0]
         p = log_p.exp()
         loss = -((1.0 - p)**self.gamma) * log_p
         if self.class_weight is not None:
             weight = torch.tensor(
                 self.class_weight, dtype=loss.dtype, device=loss.device)
             loss = loss * weight[labels]
-        return self.loss_weight * loss.mean()
+        return loss.mean()

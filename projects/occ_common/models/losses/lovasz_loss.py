@@ -8,15 +8,14 @@ batch returns an empty (0, C) tensor instead of a scalar. This module
 handles any number of spatial axes and returns a connected zero scalar for
 an all-ignored batch.
 """
-from typing import List, Optional, Sequence, Union
+from typing import List, Optional, Sequence, Tuple, Union
 
 import torch
-import torch.nn.functional as F
 from mmdet3d.registry import MODELS
 from torch import Tensor
 
 from .occupancy_loss import OccupancyLossTerm
-from .utils import supervised_voxels, zero_with_grad
+from .utils import SupervisedVoxels
 
 
 def lovasz_softmax_flat(
@@ -58,44 +57,86 @@ def lovasz_softmax_flat(
         selected[list(classes)] = True
     if not bool(selected.any()):
         return None
-    # Only the selected classes are sorted: each class's term depends on
-    # its own column alone, and the sort is most of this loss's time.
     columns = selected.nonzero()[:, 0]
-    fg = F.one_hot(labels, num_classes)[:, columns].to(probs.dtype)
-    errors = (fg - probs[:, columns]).abs()
-    total = total[columns].to(probs.dtype)
-    with torch.no_grad():
-        # Past the last member of F_c in the sorted order the intersection
-        # is 0, so J_k = 1 from there on and g_k = 0: those voxels add
-        # nothing to the loss or its gradient. They are exactly the
-        # non-members whose error is below every member's, so only errors
-        # >= the smallest member error are sorted (for a class without
-        # members, only the largest error, whose g is 1). Early in training
-        # and for the small classes this drops most voxels.
-        member_min = torch.where(fg > 0, errors,
-                                 errors.new_tensor(float('inf'))).amin(0)
-        cut = torch.where(total > 0, member_min, errors.amax(0))
-        kept = errors >= cut
-    per_class = []
-    for j in range(len(columns)):
-        rows = kept[:, j].nonzero()[:, 0]
-        errors_sorted, order = torch.sort(
-            errors[rows, j], descending=True)
-        with torch.no_grad():
-            fg_sorted = fg[rows, j][order]
-            intersection = total[j] - fg_sorted.cumsum(0)
-            # The union is >= 1 from the first voxel on: either the class
-            # has voxels (total >= 1) or the first sorted voxel is a
-            # non-member.
-            union = total[j] + (1.0 - fg_sorted).cumsum(0)
-            jaccard = 1.0 - intersection / union
-            grad = torch.cat([jaccard[:1], jaccard[1:] - jaccard[:-1]])
-        per_class.append((errors_sorted * grad).sum())
-    per_class = torch.stack(per_class)
+    slopes, offsets = _lovasz_coefficients(probs.detach(), labels, total,
+                                           columns)
+    # Class c's loss, its sorted errors dotted with the Jaccard gradient,
+    # is linear in the probabilities: sum_i g_i |[y_i = c] - p_ic| with
+    # the g_i fixed by the order is sum_i slope_ic p_ic + offset_c. The
+    # graph holds one product, not a sort and a gather per class.
+    per_class = ((probs * slopes).sum(0) + offsets)[columns]
     if class_weight is not None:
         per_class = per_class * per_class.new_tensor(
             list(class_weight))[columns]
     return per_class.mean()
+
+
+#: The signed int type of each float type's width (for sorting by bits).
+_SAME_WIDTH_INT = {
+    torch.float64: torch.int64,
+    torch.float32: torch.int32,
+    torch.float16: torch.int16,
+    torch.bfloat16: torch.int16,
+}
+
+
+@torch.no_grad()
+def _lovasz_coefficients(probs: Tensor, labels: Tensor, total: Tensor,
+                         columns: Tensor) -> Tuple[Tensor, Tensor]:
+    """Class c's Lovasz-softmax loss as ``sum_i slope_ic p_ic + offset_c``.
+
+    The errors :math:`m_i = |[y_i = c] - p_{i,c}|` sorted in decreasing
+    order get the gradient of the Lovasz extension of the Jaccard loss,
+    :math:`g_k = J_k - J_{k-1}`. An error is :math:`1 - p` for a voxel of
+    class c and :math:`p` for any other, so the loss
+    :math:`\\sum_k g_k m_{(k)}` is :math:`\\sum_i s_i g_i p_{i,c}` plus
+    the sum of the members' :math:`g_i`, with :math:`s_i = -1` on members
+    and +1 elsewhere: the same value and, the order fixed, the same
+    gradient. Errors below the smallest error of a member come after every
+    member in the order, where the Jaccard loss stays 1 (:math:`g = 0`);
+    they are left out of the sort. A class without voxels keeps only its
+    largest error (:math:`g_1 = 1`).
+
+    Args:
+        probs (Tensor): Softmax probabilities. Shape (N, C).
+        labels (Tensor): Labels in ``[0, C)``. Shape (N,).
+        total (Tensor): Voxels of each class. Shape (C,).
+        columns (Tensor): The classes to weigh. Shape (K,).
+
+    Returns:
+        tuple[Tensor, Tensor]: The slopes, zero outside ``columns``, Shape
+        (N, C), and the offsets, Shape (C,).
+    """
+    num_voxels, num_classes = probs.shape
+    # A copy (contiguous() would alias probs when N = 1), class-major.
+    errors = probs.t().clone(memory_format=torch.contiguous_format)
+    # Each voxel's own class: error 1 - p (flat index of (y_i, i)).
+    own = labels * num_voxels + torch.arange(num_voxels, device=labels.device)
+    own_errors = 1.0 - errors.view(-1)[own]
+    errors.view(-1)[own] = own_errors
+    member_min = errors.new_ones(num_classes).scatter_reduce(
+        0, labels, own_errors, 'amin')
+    slopes = torch.zeros_like(errors)
+    offsets = probs.new_zeros(num_classes)
+    for c in columns.tolist():
+        count = total[c].to(probs.dtype)
+        cut = member_min[c] if bool(count > 0) else errors[c].max()
+        rows = (errors[c] >= cut).nonzero()[:, 0]
+        # Decreasing errors: the errors lie in [0, 1], where a float's bits
+        # read as an int of its width sort in the float's order, and a
+        # stable ascending sort of ints (of the negated bits) is a radix
+        # sort on CPU, ~7x faster than sorting float32 errors of 640k
+        # voxels (ties keep voxel order).
+        keys = errors[c][rows].view(_SAME_WIDTH_INT[errors.dtype]).neg()
+        rows = rows[torch.sort(keys, stable=True)[1]]
+        is_member = labels[rows] == c
+        hits = is_member.to(probs.dtype)
+        jaccard = 1.0 - (count - hits.cumsum(0)) / (
+            count + (1.0 - hits).cumsum(0))
+        grad = torch.cat([jaccard[:1], jaccard[1:] - jaccard[:-1]])
+        offsets[c] = grad[is_member].sum()
+        slopes[c, rows] = torch.where(is_member, -grad, grad)
+    return slopes.t().contiguous(), offsets
 
 
 @MODELS.register_module()
@@ -134,24 +175,16 @@ class OccLovaszLoss(OccupancyLossTerm):
         self.classes: Union[str, List[int]] = (
             classes if isinstance(classes, str) else list(classes))
 
-    def forward(self, logits: Tensor, target: Tensor) -> Tensor:
-        """Lovasz-softmax of the supervised voxels (see
-        :class:`~.occupancy_loss.OccupancyLossTerm` for the shapes)."""
-        # Shapes are checked by supervised_voxels; this needs only C.
-        num_classes = logits.shape[1] if logits.dim() >= 2 else None
-        if num_classes is not None and not isinstance(
-                self.classes, str) and any(c < 0 or c >= num_classes
-                                           for c in self.classes):
+    def check_classes(self, num_classes: int) -> None:
+        """Also refuse listed classes outside ``[0, C)``."""
+        super().check_classes(num_classes)
+        if not isinstance(self.classes, str) and any(
+                c < 0 or c >= num_classes for c in self.classes):
             raise ValueError(f'OccLovaszLoss: classes {self.classes} out of '
                              f'range for {num_classes} classes.')
-        picked = supervised_voxels(logits, target, self.ignore_index,
-                                   'OccLovaszLoss', self.class_weight)
-        if picked is None:
-            return zero_with_grad(logits)
-        scores, labels = picked
-        probs = F.softmax(scores, dim=1)
-        loss = lovasz_softmax_flat(probs, labels, self.classes,
+
+    def loss_voxels(self, voxels: SupervisedVoxels) -> Optional[Tensor]:
+        """Lovasz-softmax of the supervised voxels (unweighted); None when
+        no class is selected."""
+        return lovasz_softmax_flat(voxels.probs, voxels.labels, self.classes,
                                    self.class_weight)
-        if loss is None:
-            return zero_with_grad(logits)
-        return self.loss_weight * loss

@@ -17,6 +17,7 @@ from mmdet3d.registry import MODELS
 from torch import Tensor
 
 from .occupancy_gt_downsample import downsample_occupancy_gt
+from .utils import SupervisedVoxels, supervised_voxels, zero_with_grad
 
 #: Label arguments a composed loss hands to the terms that take them.
 SHARED_LABELS = ('empty_index', 'ignore_index')
@@ -25,10 +26,13 @@ SHARED_LABELS = ('empty_index', 'ignore_index')
 class OccupancyLossTerm(nn.Module):
     """Base of the per-voxel occupancy losses (focal, Lovasz, SCAL).
 
-    Subclasses implement ``forward(logits, target) -> scalar`` with logits
-    Shape (B, C, X, Y, Z) or (N, C) and integer targets Shape (B, X, Y, Z)
-    or (N,), labels in ``[0, C)`` or ``ignore_index``; an all-ignored input
-    gives a zero still connected to the logits.
+    Called as ``term(logits, target) -> scalar`` with logits Shape
+    (B, C, X, Y, Z) or (N, C) and integer targets Shape (B, X, Y, Z) or
+    (N,), labels in ``[0, C)`` or ``ignore_index``; an all-ignored input
+    gives a zero still connected to the logits. Subclasses implement
+    :meth:`loss_voxels` on the :class:`~.utils.SupervisedVoxels`, which
+    :class:`OccupancyLoss` selects once for all its terms, and extend
+    :meth:`check_classes` with their own checks of C.
 
     Args:
         ignore_index (int): Label of voxels without supervision.
@@ -50,6 +54,62 @@ class OccupancyLossTerm(nn.Module):
         self.loss_weight = loss_weight
         self.class_weight = (None if class_weight is None else
                              [float(w) for w in class_weight])
+
+    @property
+    def error_name(self) -> str:
+        """The term's name in error messages."""
+        return type(self).__name__
+
+    def check_classes(self, num_classes: int) -> None:
+        """Refuse settings that do not fit C classes.
+
+        Raises:
+            ValueError: If ``class_weight`` does not hold C weights.
+        """
+        if (self.class_weight is not None
+                and len(self.class_weight) != num_classes):
+            raise ValueError(
+                f'{self.error_name}: expected {num_classes} class weights '
+                f'for logits with {num_classes} classes, got '
+                f'{len(self.class_weight)}.')
+
+    def loss_voxels(self, voxels: SupervisedVoxels) -> Optional[Tensor]:
+        """The unweighted loss of the supervised voxels.
+
+        Args:
+            voxels (SupervisedVoxels): At least one voxel.
+
+        Returns:
+            Tensor | None: Scalar, or None when the term has nothing to
+            measure (e.g. no selected class present).
+        """
+        raise NotImplementedError(
+            f'{type(self).__name__} does not implement loss_voxels.')
+
+    def weighted(self, voxels: Optional[SupervisedVoxels],
+                 logits: Tensor) -> Tensor:
+        """``loss_weight`` times :meth:`loss_voxels`, or a connected zero.
+
+        Args:
+            voxels (SupervisedVoxels | None): The supervised voxels of
+                ``logits``; None when there are none.
+            logits (Tensor): The prediction they come from.
+
+        Returns:
+            Tensor: Scalar.
+        """
+        loss = None if voxels is None else self.loss_voxels(voxels)
+        if loss is None:
+            return zero_with_grad(logits)
+        return self.loss_weight * loss
+
+    def forward(self, logits: Tensor, target: Tensor) -> Tensor:
+        """The term on one prediction (shapes in the class docstring)."""
+        if logits.dim() >= 2:
+            self.check_classes(logits.shape[1])
+        voxels = supervised_voxels(logits, target, self.ignore_index,
+                                   self.error_name)
+        return self.weighted(voxels, logits)
 
 
 def term_name(loss: nn.Module) -> str:
@@ -145,8 +205,19 @@ class OccupancyLoss(nn.Module):
         Returns:
             dict[str, Tensor]: ``{term_name + key_suffix: scalar}``.
         """
+        voxels = None
+        shared = [t for t in self.losses if isinstance(t, OccupancyLossTerm)]
+        if shared:
+            # Flatten, select and softmax once for every term.
+            for term in shared:
+                if logits.dim() >= 2:
+                    term.check_classes(logits.shape[1])
+            voxels = supervised_voxels(logits, target, self.ignore_index,
+                                       type(self).__name__)
         return {
-            name + key_suffix: loss(logits, target) / factor
+            name + key_suffix:
+            (loss.weighted(voxels, logits) if isinstance(
+                loss, OccupancyLossTerm) else loss(logits, target)) / factor
             for name, loss in zip(self.term_names, self.losses)
         }
 

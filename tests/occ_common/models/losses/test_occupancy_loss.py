@@ -176,3 +176,49 @@ def test_term_name():
     assert term_name(OccFocalLoss()) == 'loss_focal'
     assert term_name(SceneClassAffinityLoss(mode='geo')) == 'loss_geo_scal'
     assert term_name(MyThingLoss()) == 'loss_my_thing'
+
+
+def test_terms_share_one_selection_and_softmax(monkeypatch):
+    """The composed loss selects the supervised voxels and takes their
+    softmax once per scale for all its terms (the terms used to do both
+    each: 4 softmaxes a scale), and every term's value and the gradient of
+    the sum equal those of the terms called one by one.
+
+    Two scales of a (2, 5, 4, 4, 4) prediction, 5 classes, a few ignored
+    voxels, the four terms of OccCylindrical's config."""
+    import torch.nn.functional as F
+    gen = torch.Generator().manual_seed(4)
+    scales = [
+        torch.randn(2, 5, 4, 4, 4, generator=gen, requires_grad=True),
+        torch.randn(2, 5, 2, 2, 2, generator=gen, requires_grad=True)
+    ]
+    gt = torch.randint(0, 5, (2, 4, 4, 4), generator=gen)
+    gt[0, 0, 0] = IGN
+    terms = [dict(type='OccFocalLoss'), dict(type='OccLovaszLoss'),
+             dict(type='SceneClassAffinityLoss', mode='geo'),
+             dict(type='SceneClassAffinityLoss', mode='sem')]
+    loss = MultiScaleOccupancyLoss(terms, num_scales=2)
+    calls = []
+    for name in ('softmax', 'log_softmax'):
+        real = getattr(F, name)
+        monkeypatch.setattr(
+            F, name,
+            lambda *a, _real=real, _name=name, **k: calls.append(_name) or
+            _real(*a, **k))
+    composed = loss(scales, gt)
+    monkeypatch.undo()
+    assert calls == ['log_softmax', 'log_softmax']
+    (grad0, grad1) = torch.autograd.grad(sum(composed.values()), scales)
+
+    alone = {}
+    for level, logits in enumerate(scales):
+        target = downsample_occupancy_gt(gt, 2**level, E, IGN)
+        for term in loss.losses:
+            alone[f'{term_name(term)}_s{level}'] = term(logits,
+                                                        target) / 2**level
+    assert list(alone) == list(composed)
+    for key, value in alone.items():
+        torch.testing.assert_close(composed[key], value)
+    (ref0, ref1) = torch.autograd.grad(sum(alone.values()), scales)
+    torch.testing.assert_close(grad0, ref0)
+    torch.testing.assert_close(grad1, ref1)

@@ -161,3 +161,43 @@ def test_sem_matches_per_class_loop_with_gradients():
     assert len(terms) == 4
     torch.testing.assert_close(loss, expected)
     torch.testing.assert_close(grad, expected_grad)
+
+
+def _scal_by_definition(probs, labels, columns, eps=1e-5):
+    """MonoScene's three terms per column of p (N, K), t (N, K), summed
+    over the voxels in the probabilities' dtype, then the mean."""
+    p, t = probs, labels
+    tp = (p * t).sum(0)
+    terms = (-torch.log((tp + eps) / (p.sum(0) + eps)) -
+             torch.log((tp + eps) / (t.sum(0) + eps)) -
+             torch.log((((1 - p) * (1 - t)).sum(0) + eps) /
+                       ((1 - t).sum(0) + eps)))
+    return terms[columns].mean()
+
+
+@pytest.mark.parametrize('mode', ['geo', 'sem'])
+def test_many_confident_voxels_keep_float32_precision(mode):
+    """400,000 voxels, 90 % empty, every voxel's own class at logit +8
+    over N(0, 1) (p ~ 0.998, as a trained model's empty space): the float32
+    loss equals the float64 definition to 1e-5 relative. Summed one voxel
+    at a time in float32 (index_add), the empty voxels' own probabilities
+    (359,277 over ~360k voxels) come out 1.3e-3 (~450) too large, over half
+    the ~720 they miss of a perfect recall, and the semantic loss fails
+    this test; the per-class sums are therefore float64."""
+    gen = torch.Generator().manual_seed(2)
+    labels = torch.multinomial(
+        torch.tensor([0.9, 0.05, 0.03, 0.02]), 400000, replacement=True,
+        generator=gen)
+    logits = torch.randn(400000, 4, generator=gen)
+    logits[torch.arange(400000), labels] += 8.0
+    loss = SceneClassAffinityLoss(mode=mode)(logits, labels)
+    probs = torch.softmax(logits.double(), dim=1)
+    if mode == 'geo':
+        expected = _scal_by_definition(
+            1.0 - probs[:, :1], (labels != 0).double()[:, None], [0])
+    else:
+        expected = _scal_by_definition(
+            probs, torch.nn.functional.one_hot(labels, 4).double(),
+            [0, 1, 2, 3])
+    assert loss.dtype == torch.float32
+    torch.testing.assert_close(loss.double(), expected, rtol=1e-5, atol=0)
