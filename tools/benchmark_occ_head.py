@@ -21,7 +21,6 @@ Example::
 import argparse
 import contextlib
 import json
-import statistics
 import types
 from typing import Dict, List, Optional, Tuple
 
@@ -32,7 +31,8 @@ from mmengine.registry import init_default_scope
 from mmengine.utils import import_modules_from_strings
 from torch import Tensor
 
-from projects.occ_common.utils.benchmarking import alternating_runs
+from projects.occ_common.utils.benchmarking import (alternating_runs,
+                                                    round_medians)
 from projects.occ_cyl.cylindrical_occ_head import sample_tpv_planes
 from projects.occ_cyl.group_pooling import PLANE_POOL_AXES
 
@@ -141,14 +141,7 @@ def measure(model, planes, rounds: int) -> Dict[str, dict]:
             summed = head(planes)
     diff = max((a - b).abs().max().item()
                for a, b in zip(projected, summed))
-    times = alternating_runs(calls, rounds, warmup=1)
-    result = {
-        name: dict(
-            wall_s=statistics.median(t['wall_s']),
-            cpu_s=statistics.median(t['cpu_s']),
-            rounds=t)
-        for name, t in times.items()
-    }
+    result = round_medians(alternating_runs(calls, rounds, warmup=1))
     result['max_abs_diff'] = diff
     result['voxels'] = int(torch.Size(head.scale_shapes[0]).numel())
     return result

@@ -211,6 +211,26 @@ def alternating_runs(
     return times
 
 
+def round_medians(
+        times: Dict[str, Dict[str, List[float]]]) -> Dict[str, dict]:
+    """The medians of :func:`alternating_runs`'s rounds, per call.
+
+    Args:
+        times (dict): Name -> ``{'wall_s': [...], 'cpu_s': [...]}``.
+
+    Returns:
+        dict: Name -> ``{'wall_s': median, 'cpu_s': median, 'rounds':
+        the per-round times}``.
+    """
+    return {
+        name: dict(
+            wall_s=statistics.median(t['wall_s']),
+            cpu_s=statistics.median(t['cpu_s']),
+            rounds=t)
+        for name, t in times.items()
+    }
+
+
 def count_gflop(run: Callable[[], object]) -> float:
     """GFLOP of one call, by ``torch.utils.flop_counter``.
 

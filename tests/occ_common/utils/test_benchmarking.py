@@ -5,7 +5,8 @@ import torch
 from projects.occ_common.utils.benchmarking import (PeakMemory,
                                                     alternating_runs,
                                                     count_gflop, matmul_call,
-                                                    matmul_share, summarise,
+                                                    matmul_share,
+                                                    round_medians, summarise,
                                                     timed_runs)
 
 
@@ -76,3 +77,11 @@ def test_matmul_rate_and_share():
     assert matmul_share(60.0, 1.0, 150.0) == pytest.approx(0.4)
     with pytest.raises(ValueError, match='positive time'):
         matmul_share(1.0, 0.0, 150.0)
+
+
+def test_round_medians_keep_the_rounds():
+    """Rounds of 3, 1, 2 s wall and 0.5, 0.25, 1.0 s CPU: medians 2 and
+    0.5, the rounds kept as they were."""
+    rounds = dict(wall_s=[3.0, 1.0, 2.0], cpu_s=[0.5, 0.25, 1.0])
+    assert round_medians(dict(a=rounds)) == dict(
+        a=dict(wall_s=2.0, cpu_s=0.5, rounds=rounds))
