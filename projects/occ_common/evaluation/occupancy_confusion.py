@@ -4,7 +4,9 @@ Everything the occupancy metric reports is derived from a C x C confusion
 matrix (rows: ground truth, columns: prediction) accumulated over the
 dataset, so per-rank results reduce by summation.
 """
-from typing import Sequence
+import csv
+import os
+from typing import List, Sequence, Tuple
 
 import numpy as np
 import torch
@@ -88,3 +90,89 @@ def geometric_iou(confusion: np.ndarray, empty_index: int) -> float:
     union = (confusion[occupied].sum() + confusion[:, occupied].sum() -
              true_pos)
     return float(true_pos / union) if union > 0 else float('nan')
+
+
+#: First cell of a confusion CSV's header row (rows GT, columns prediction).
+CONFUSION_CSV_CORNER = 'gt \\ pred'
+
+
+def write_confusion_csv(path: str, confusion: np.ndarray,
+                        class_names: Sequence[str]) -> None:
+    """Write a confusion matrix as CSV, class names on both axes.
+
+    The header row is ``gt \\ pred`` and the C class names; each further
+    row is a GT class name and its C integer counts, so that a reader (a
+    spreadsheet, ``numpy.loadtxt``, :func:`read_confusion_csv`) sees where
+    each class's voxels went. The parent folder is made if needed.
+
+    Args:
+        path (str): File to write.
+        confusion (np.ndarray): Counts, rows GT. Shape (C, C).
+        class_names (Sequence[str]): The C names, in label order.
+    """
+    confusion = np.asarray(confusion)
+    names = [str(n) for n in class_names]
+    if confusion.shape != (len(names), len(names)):
+        raise ValueError(f'write_confusion_csv: {path}: expected a '
+                         f'({len(names)}, {len(names)}) matrix for classes '
+                         f'{names}, got shape {confusion.shape}.')
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    with open(path, 'w', newline='') as f:
+        writer = csv.writer(f)
+        writer.writerow([CONFUSION_CSV_CORNER] + names)
+        for name, row in zip(names, confusion):
+            writer.writerow([name] + [int(v) for v in row])
+
+
+def read_confusion_csv(path: str) -> Tuple[List[str], np.ndarray]:
+    """Read a matrix written by :func:`write_confusion_csv`.
+
+    Args:
+        path (str): The CSV file.
+
+    Returns:
+        tuple[list[str], np.ndarray]: The C class names and the int64
+        counts, rows GT. Shape (C, C).
+    """
+    with open(path, newline='') as f:
+        rows = list(csv.reader(f))
+    if not rows or rows[0][:1] != [CONFUSION_CSV_CORNER]:
+        raise ValueError(f'read_confusion_csv: {path}: expected a header row'
+                         f' starting with {CONFUSION_CSV_CORNER!r}.')
+    names = rows[0][1:]
+    body = rows[1:]
+    if [r[:1] for r in body] != [[n] for n in names] or any(
+            len(r) != len(names) + 1 for r in body):
+        raise ValueError(f'read_confusion_csv: {path}: expected one row per '
+                         f'class {names}, in header order, with '
+                         f'{len(names)} counts each.')
+    try:
+        counts = np.array([[int(v) for v in r[1:]] for r in body],
+                          dtype=np.int64).reshape(len(names), len(names))
+    except ValueError as err:
+        raise ValueError(f'read_confusion_csv: {path}: a count is not an '
+                         f'integer ({err}).') from None
+    return names, counts
+
+
+def largest_confusions(confusion: np.ndarray, gt_class: int,
+                       k: int = 2) -> List[Tuple[int, float]]:
+    """The ``k`` other classes that take most of a class's GT voxels.
+
+    Args:
+        confusion (np.ndarray): Counts, rows GT. Shape (C, C).
+        gt_class (int): The class whose row is read.
+        k (int): How many classes to return. Defaults to 2.
+
+    Returns:
+        list[tuple[int, float]]: ``(predicted class, share of gt_class's
+        GT voxels)``, largest share first, ties to the lower label; classes
+        that take none are left out, so the list may be shorter than k.
+    """
+    row = np.asarray(confusion, dtype=np.float64)[gt_class]
+    total = row.sum()
+    if total == 0:
+        return []
+    order = sorted((c for c in range(row.size) if c != gt_class),
+                   key=lambda c: (-row[c], c))
+    return [(c, float(row[c] / total)) for c in order[:k] if row[c] > 0]

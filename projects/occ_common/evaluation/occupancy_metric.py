@@ -10,7 +10,7 @@ from mmengine.logging import print_log
 from ..datasets.nuscenes_classes import OCC3D_CLASS_NAMES
 from ..datasets.occ_formats import SURROUNDOCC_CLASS_NAMES
 from .occupancy_confusion import (confusion_matrix, geometric_iou, mean_iou,
-                                  per_class_iou)
+                                  per_class_iou, write_confusion_csv)
 from .occupancy_export import write_prediction, zip_folder_files
 
 # The label tables live once, in datasets/, so that the metric cannot
@@ -69,6 +69,12 @@ class OccupancyMetric(BaseMetric):
     the subset flags, and ``'sample_idx'`` to name the sample in errors.
     Only confusion matrices are stored per sample.
 
+    With ``confusion_file`` the dataset's confusion matrix (all counted
+    voxels, rows GT, columns prediction) is also written there as CSV
+    (:func:`.write_confusion_csv`), to show where a weak class's voxels
+    go, e.g. ``tools/test.py CONFIG CKPT --cfg-options
+    test_evaluator.confusion_file=work_dirs/confusion.csv``.
+
     With ``submission_prefix`` every prediction is also written there, in
     the layout of its convention (:mod:`.occupancy_export`: Occ3D
     ``<token>.npz`` files and their ``.zip``, SurroundOcc ``.npy`` rows),
@@ -102,6 +108,8 @@ class OccupancyMetric(BaseMetric):
             ``submission_prefix``. Defaults to False.
         submission_prefix (str, optional): Folder of the prediction files.
             Defaults to None (none written).
+        confusion_file (str, optional): CSV file for the confusion
+            matrix. Defaults to None (none written).
         collect_device (str): Device to gather results on. Defaults to
             'cpu'.
         prefix (str, optional): Key prefix. Defaults to ``'occ'``.
@@ -124,6 +132,7 @@ class OccupancyMetric(BaseMetric):
                  class_voxel_counts: bool = False,
                  format_only: bool = False,
                  submission_prefix: Optional[str] = None,
+                 confusion_file: Optional[str] = None,
                  collect_device: str = 'cpu',
                  prefix: Optional[str] = None,
                  collect_dir: Optional[str] = None) -> None:
@@ -154,6 +163,7 @@ class OccupancyMetric(BaseMetric):
                              'predictions to submission_prefix; give one.')
         self.format_only = format_only
         self.submission_prefix = submission_prefix
+        self.confusion_file = confusion_file
         self.subsets = tuple(subsets or ())
         self.ignore_index = ignore_index
         self.class_voxel_counts = bool(class_voxel_counts)
@@ -341,6 +351,10 @@ class OccupancyMetric(BaseMetric):
         size = (self.num_classes, self.num_classes)
         total = sum((r['confusion'] for r in results), np.zeros(size, int))
         columns = {'all': total}
+        if self.confusion_file is not None:
+            write_confusion_csv(self.confusion_file, total, self.class_names)
+            print_log(f'OccupancyMetric: wrote the confusion matrix to '
+                      f'{self.confusion_file}', logger='current')
         metrics = self._scores(total)
         metrics.update({
             name: float(iou) * 100

@@ -9,7 +9,8 @@ import pytest
 import torch
 
 from projects.occ_common.evaluation import (OCC3D_CLASSES, SURROUNDOCC_CLASSES,
-                                            OccupancyMetric)
+                                            OccupancyMetric,
+                                            read_confusion_csv)
 
 SURROUND4 = ('empty', 'a', 'b', 'c')
 OCC3D4 = ('others', 'a', 'b', 'free')
@@ -308,3 +309,36 @@ def test_default_classes_are_the_label_formats():
         spec = OCC_FORMATS[convention]
         assert metric.class_names == spec.class_names
         assert metric.empty_index == spec.empty_label
+
+
+def test_confusion_file_holds_the_dataset_matrix(tmp_path):
+    """Two samples; the CSV holds their summed matrix, rows GT.
+
+    sample 1 (as in test_surroundocc_hand_computed, voxel 5 ignored):
+        (0,0) x2, (0,1), (1,1) x2, (1,2), (2,0)
+    sample 2: gt 3 3 3 3 0 0 0 0, pred 3 3 2 0 0 0 0 0
+        (3,3) x2, (3,2), (3,0), (0,0) x4
+    sum: empty row 6 1 0 0; a 0 2 1 0; b 1 0 0 0; c 1 0 1 2
+    """
+    path = tmp_path / 'sub' / 'confusion.csv'
+    metric = OccupancyMetric(class_names=SURROUND4, confusion_file=str(path))
+    _run(metric, [
+        _sample([0, 0, 1, 1, 2, 255, 0, 1], [0, 1, 1, 1, 0, 3, 0, 2]),
+        _sample([3, 3, 3, 3, 0, 0, 0, 0], [3, 3, 2, 0, 0, 0, 0, 0], 's1'),
+    ])
+    assert path.read_text().splitlines() == [
+        'gt \\ pred,empty,a,b,c', 'empty,6,1,0,0', 'a,0,2,1,0', 'b,1,0,0,0',
+        'c,1,0,1,2'
+    ]
+    names, counts = read_confusion_csv(str(path))
+    assert names == list(SURROUND4)
+    assert counts.tolist() == [[6, 1, 0, 0], [0, 2, 1, 0], [1, 0, 0, 0],
+                               [1, 0, 1, 2]]
+
+
+def test_no_confusion_file_by_default(tmp_path, monkeypatch):
+    """Without the option nothing is written (here: in the cwd)."""
+    monkeypatch.chdir(tmp_path)
+    _run(OccupancyMetric(class_names=SURROUND4),
+         [_sample([0, 1, 1, 1, 0, 0, 0, 0], [0, 1, 0, 1, 0, 0, 0, 0])])
+    assert list(tmp_path.iterdir()) == []
