@@ -18,8 +18,9 @@ held-out ones, and draw their learning curves.
    pictures of prediction against ground truth per run);
 4. writes ``runs/<name>/curve.png`` (validation IoU / mIoU and training
    loss against iterations) and ``results.md`` / ``results.json`` (IoU,
-   mIoU, per-class IoU, train time, iterations) of every finished run in
-   ``--out``.
+   mIoU, per-class IoU, train time, iterations, and where the classes
+   under IoU 10 put their voxels, from ``runs/<name>/confusion.csv``) of
+   every finished run in ``--out``.
 
 It resumes: a killed run continues from its last checkpoint, and a finished
 run (``runs/<name>/result.json`` with the same settings) is reused. Nothing
@@ -38,6 +39,8 @@ import sys
 import time
 from typing import Dict, List, Optional
 
+from projects.occ_common.evaluation import (largest_confusions,
+                                            read_confusion_csv)
 from projects.occ_common.utils.tool_runs import (LARGE_CLASS_MIN_IOU,
                                                  LARGE_CLASS_VOXELS,
                                                  data_options, format_table,
@@ -109,6 +112,8 @@ RUNS.update({
 })
 #: Files of a run folder.
 RESULT, SETTINGS, CLOCK = 'result.json', 'settings.json', 'train_clock.json'
+#: The test's confusion matrix in a run folder (OccupancyMetric's CSV).
+CONFUSION = 'confusion.csv'
 
 
 def parse_args(argv=None):
@@ -498,8 +503,13 @@ def bench_run(name: str, config: str, options: List[str], args,
     test_dir = osp.join(run_dir, 'test')
     cmd = tool('test.py') + [config, _last_checkpoint(work_dir),
                              '--work-dir', test_dir]
-    # The GT voxels of every class, for the table's large-class line.
-    test_options = list(options) + ['test_evaluator.class_voxel_counts=True']
+    # The GT voxels of every class, for the table's large-class line, and
+    # the confusion matrix, for where the weak classes' voxels go.
+    confusion_csv = osp.join(run_dir, CONFUSION)
+    test_options = list(options) + [
+        'test_evaluator.class_voxel_counts=True',
+        f'test_evaluator.confusion_file={confusion_csv}'
+    ]
     if args.pictures > 0:
         # Spread the pictures over the val split (its length is known from
         # the last validation's sample count only inside the Runner, so
@@ -529,6 +539,7 @@ def bench_run(name: str, config: str, options: List[str], args,
                iterations=clock['iterations'],
                stopped_by_time=clock['stopped_by_time'], metrics=metrics,
                curves=curves, curve_png=curve_png,
+               confusion_csv=confusion_csv,
                pictures=osp.join(run_dir, 'pictures'), settings=settings)
     with open(osp.join(run_dir, RESULT), 'w') as f:
         json.dump(row, f, indent=1)
@@ -554,6 +565,25 @@ def _weak_large_classes(row: dict) -> str:
     weak = [name for name in large_classes(metrics)
             if not metrics.get(f'occ/{name}', 0.0) > LARGE_CLASS_MIN_IOU]
     return ', '.join(weak) or 'none'
+
+
+def _weak_class_confusions(row: dict) -> str:
+    """For each weak large class, the two classes that take most of its
+    GT voxels, e.g. ``'bicycle: empty 61 %, car 9 %'`` ('n/a' for a run
+    tested before the confusion matrix was written)."""
+    path = row.get('confusion_csv')
+    weak = _weak_large_classes(row)
+    if weak in ('n/a', 'none'):
+        return weak
+    if not path or not osp.isfile(path):
+        return 'n/a'
+    names, confusion = read_confusion_csv(path)
+    parts = []
+    for name in weak.split(', '):
+        went = largest_confusions(confusion, names.index(name))
+        parts.append(f'{name}: ' + ', '.join(
+            f'{names[c]} {share * 100:.0f} %' for c, share in went))
+    return '; '.join(parts)
 
 
 def main(argv=None):
@@ -588,6 +618,7 @@ def main(argv=None):
         ('best val mIoU (at it)', _best_val),
         (f'classes of >= {LARGE_CLASS_VOXELS:,} GT voxels at IoU <= '
          f'{LARGE_CLASS_MIN_IOU:g}', _weak_large_classes),
+        ('their GT voxels mostly predicted as', _weak_class_confusions),
     ])
     header = (f'Held-out synthetic scenes ({args.val_scenes} of '
               f'{args.scenes}, {args.samples} key frames each, '

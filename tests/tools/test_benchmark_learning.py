@@ -12,9 +12,12 @@ import subprocess
 import sys
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 from mmengine.config import Config, DictAction
 
+from projects.occ_common.evaluation import (read_confusion_csv,
+                                            write_confusion_csv)
 from projects.occ_common.testing.tool_logs import load_tool
 from projects.occ_common.utils import tool_runs
 
@@ -162,6 +165,12 @@ def test_bench_run_writes_row_and_reuses_it(tmp_path, capsys):
               if k.startswith('occ/gt_voxels/')]
     assert counts and all(isinstance(v, float) for v in counts)
     assert 0 < sum(counts) <= 4 * 8 * 8 * 4
+    # The test's confusion matrix: its rows add up to the same counts.
+    names, confusion = read_confusion_csv(row['confusion_csv'])
+    assert {f'occ/gt_voxels/{n}': float(c)
+            for n, c in zip(names, confusion.sum(1))} == {
+                k: v for k, v in row['metrics'].items()
+                if k.startswith('occ/gt_voxels/')}
     assert retested['iterations'] == 4
     args.retest = False
     args.iters = 8
@@ -219,6 +228,26 @@ def test_class_lines_show_gt_voxels_and_weak_large_classes():
                       'occ/gt_voxels/car': None}
     assert _tool()._weak_large_classes(row) == 'n/a'
     assert '| car | 5.00 |' in tool_runs.format_table([row]).splitlines()
+
+
+def test_weak_classes_name_where_their_voxels_went(tmp_path):
+    """car (IoU 5, 2,000 GT voxels) is weak; of its row (100, 20, 1,880,
+    0): bus takes 1,880 / 2,000 = 94 %, empty 100 / 2,000 = 5 %. A row
+    without a CSV reads 'n/a'; one without weak classes 'none'."""
+    names = ('empty', 'car', 'bus', 'bicycle')
+    path = str(tmp_path / 'confusion.csv')
+    write_confusion_csv(path, np.array([[9000, 0, 0, 0], [100, 20, 1880, 0],
+                                        [0, 0, 1000, 0], [0, 0, 0, 0]]),
+                        names)
+    metrics = {'occ/car': 5.0, 'occ/bus': 60.0, 'occ/gt_voxels/car': 2000,
+               'occ/gt_voxels/bus': 1000, 'occ/gt_voxels/bicycle': 0,
+               'occ/gt_voxels/empty': 9000}
+    row = dict(metrics=metrics, confusion_csv=path)
+    assert _tool()._weak_class_confusions(row) == 'car: bus 94 %, empty 5 %'
+    row['confusion_csv'] = str(tmp_path / 'missing.csv')
+    assert _tool()._weak_class_confusions(row) == 'n/a'
+    metrics['occ/car'] = 50.0
+    assert _tool()._weak_class_confusions(row) == 'none'
 
 
 _CAMERA_OFF = dict(variant='camera', lidar_encoder=None, fusion=None,
