@@ -29,7 +29,8 @@ from projects.occ_common.datasets.nuscenes_classes import (OCC_CLASS_NAMES,
                                                            lidarseg_to_occ16)
 from projects.occ_common.datasets.synthetic import camera_label_path
 from projects.occ_common.utils.split_dataset import (add_split_arguments,
-                                                     build_split_dataset)
+                                                     build_split_dataset,
+                                                     load_tool_config)
 
 #: Name of occupancy label 0 in the pixel maps: the sky (raw class 0 of
 #: the maps) and lidarseg noise.
@@ -173,10 +174,7 @@ def measure(cfg: Config, split: str = 'val', data_root: str = None,
 def main(argv=None) -> dict:
     """Measure and print; returns the numbers."""
     args = parse_args(argv)
-    # Config.fromfile imports the config's custom_imports (the plugins).
-    cfg = Config.fromfile(args.config)
-    if args.cfg_options:
-        cfg.merge_from_dict(args.cfg_options)
+    cfg = load_tool_config(args)
     out = measure(cfg, args.split, args.data_root, tuple(args.cells))
     rows, cols = args.cells
     print(f'{args.config} ({args.split}, {out["samples"]} samples, '

@@ -24,7 +24,8 @@ from mmengine.config import Config, DictAction
 
 from projects.occ_common.transforms.point_labels import point_voxel_index
 from projects.occ_common.utils.split_dataset import (add_split_arguments,
-                                                     build_split_dataset)
+                                                     labelled_samples,
+                                                     load_tool_config)
 from projects.occ_common.visualization.camera_overlay import voxel_centres
 
 
@@ -120,28 +121,16 @@ class VisibilityCount:
 def measure(cfg: Config, split: str = 'val', data_root: str = None,
             near: float = 20.0) -> Dict[str, dict]:
     """:meth:`VisibilityCount.summary` over the samples of ``split``."""
-    dataset = build_split_dataset(cfg, split, data_root)
-    grid = tuple(cfg.grid_size)
     count = VisibilityCount(cfg.point_cloud_range, cfg.voxel_size, near)
-    for index in range(len(dataset)):
-        sample = dataset[index]
-        occ = sample['data_samples'].get('gt_occ')
-        if occ is None or tuple(occ.shape) != grid:
-            raise ValueError(
-                f'{dataset.ann_file}, sample {index}: expected occupancy '
-                f'labels of the config\'s grid_size {grid}, got ' +
-                ('none' if occ is None else str(tuple(occ.shape))))
-        count.update(occ.numpy(), sample['inputs']['points'].numpy())
+    for sample, occ in labelled_samples(cfg, split, data_root):
+        count.update(occ, sample['inputs']['points'].numpy())
     return count.summary(list(cfg.class_names))
 
 
 def main(argv=None) -> Dict[str, dict]:
     """Measure and print; returns the numbers."""
     args = parse_args(argv)
-    # Config.fromfile imports the config's custom_imports (the plugins).
-    cfg = Config.fromfile(args.config)
-    if args.cfg_options:
-        cfg.merge_from_dict(args.cfg_options)
+    cfg = load_tool_config(args)
     out = measure(cfg, args.split, args.data_root, args.near)
     print(f'{args.config} ({args.split}): ground-truth voxels per class, '
           f'the % that hold a LiDAR return, the % within {args.near:g} m, '

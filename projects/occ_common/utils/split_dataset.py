@@ -1,7 +1,7 @@
 """The samples of a split through a config's test pipeline, for the
 analysis tools (``--split`` and ``--data-root`` on their command lines)."""
 import argparse
-from typing import Optional
+from typing import Iterator, Optional
 
 
 def add_split_arguments(parser: argparse.ArgumentParser) -> None:
@@ -40,3 +40,47 @@ def build_split_dataset(cfg, split: str = 'val',
     if data_root is not None:
         ds_cfg['data_root'] = data_root
     return DATASETS.build(ds_cfg)
+
+
+def load_tool_config(args: argparse.Namespace):
+    """``args.config`` with ``args.cfg_options`` merged in.
+
+    ``Config.fromfile`` imports the config's ``custom_imports`` (the
+    plugins), so the registries are filled afterwards.
+    """
+    from mmengine.config import Config
+
+    cfg = Config.fromfile(args.config)
+    if args.cfg_options:
+        cfg.merge_from_dict(args.cfg_options)
+    return cfg
+
+
+def labelled_samples(cfg, split: str = 'val',
+                     data_root: Optional[str] = None) -> Iterator[tuple]:
+    """The samples of a split with their occupancy labels, checked.
+
+    Args:
+        cfg (Config): A merged config with ``grid_size``.
+        split (str): See :func:`build_split_dataset`.
+        data_root (str, optional): See :func:`build_split_dataset`.
+
+    Yields:
+        tuple[dict, np.ndarray]: The packed sample and its ``gt_occ`` as
+        numpy, Shape (X, Y, Z).
+
+    Raises:
+        ValueError: A sample without labels of the config's grid, named by
+            its info file and index.
+    """
+    dataset = build_split_dataset(cfg, split, data_root)
+    grid = tuple(cfg.grid_size)
+    for index in range(len(dataset)):
+        sample = dataset[index]
+        occ = sample['data_samples'].get('gt_occ')
+        if occ is None or tuple(occ.shape) != grid:
+            raise ValueError(
+                f'{dataset.ann_file}, sample {index}: expected occupancy '
+                f'labels of the config\'s grid_size {grid}, got ' +
+                ('none' if occ is None else str(tuple(occ.shape))))
+        yield sample, occ.numpy()
