@@ -90,6 +90,11 @@ _SDG_SMALL = 'configs/sdg_occ/sdgocc-{}_small_1xb1-20e_occ3d-nus-synthetic.py'
 RUNS.update({
     'occcyl-small': (_OCC_SMALL, []),
     'occcyl-small-nodepthsup': (_OCC_SMALL, ['model.loss_depth=None']),
+    # A cylinder of twice the small config's radial and angular cells:
+    # the held-out ground truth kept at the majority class of each cell
+    # scores 89.5 mIoU on it against 69.3 on 64 x 128 x 16.
+    'occcyl-small-cyl128': (_OCC_SMALL,
+                            ['model.cylinder.shape=[128,256,16]']),
     # Not in the paper: SDG-OCC's 2-D semantic target for the image branch
     # (the config's header says why), with and without depth supervision.
     'occcyl-small-seg2d': (_OCC_SMALL_SEG2D, []),
