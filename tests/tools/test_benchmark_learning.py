@@ -258,6 +258,9 @@ _CAMERA_OFF = dict(variant='camera', lidar_encoder=None, fusion=None,
     ('occcyl-tiny-nodepthsup', dict(loss_depth=None)),
     ('occcyl-small-nodepthsup', dict(loss_depth=None)),
     ('occcyl-small-seg2d-nodepthsup', dict(loss_depth=None)),
+    ('occcyl-small-cyl128',
+     dict(cylinder=dict(shape=[128, 256, 16], radius='inscribed',
+                        clamp=True))),
     ('sdg-camera-lss-tiny', _CAMERA_OFF),
     ('sdg-camera-lss-small', _CAMERA_OFF),
     ('sdg-camera-sdg-small',
@@ -268,9 +271,10 @@ _CAMERA_OFF = dict(variant='camera', lidar_encoder=None, fusion=None,
 ])
 def test_ablation_runs_switch_their_module_off(name, expect):
     """Each named ablation run is its base config with only the named
-    modules switched off: the options merge into a config whose model has
-    those entries None (or the camera variant), while the base run's has
-    them set."""
+    modules switched off (or, for cyl128, the cylinder's shape changed
+    while its radius fit and clamping stay): the options merge into a
+    config whose model has those entries None (the camera variant, the
+    new cylinder), while the base run's has them set."""
 
     tool = _tool()
     config, options = tool.RUNS[name]
