@@ -150,11 +150,18 @@ def measure(cfg: Config, shapes: Sequence[Tuple[int, int, int]] = None,
         for c in cylinders
     ]
     totals = [np.zeros((num_classes, num_classes), np.int64) for _ in cells]
-    for sample, occ in labelled_samples(cfg, split, data_root):
+    for index, (sample, occ) in enumerate(
+            labelled_samples(cfg, split, data_root)):
         counted = occ != ignore
         if use_mask:
-            counted &= np.asarray(
-                sample['data_samples'].get('mask_camera'), bool)
+            mask = sample['data_samples'].get('mask_camera')
+            if mask is None or tuple(mask.shape) != occ.shape:
+                raise ValueError(
+                    f'{cfg.filename}, {split} sample {index}: the occ3d '
+                    'metric counts only camera-visible voxels; expected a '
+                    f'mask_camera of shape {occ.shape}, got ' +
+                    ('none' if mask is None else str(tuple(mask.shape))))
+            counted &= np.asarray(mask, bool)
         for cylinder, cell, total in zip(cylinders, cells, totals):
             pred = majority_labels(occ, cell, cylinder.num_voxels,
                                    num_classes, ignore, empty)

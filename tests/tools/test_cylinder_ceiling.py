@@ -100,3 +100,20 @@ def test_refusals():
         tool.parse_args([OCCCYL, '--shapes', '64x128'])
     with pytest.raises(Exception, match='RxThetaxZ'):
         tool.parse_shape('64x0x16')
+
+
+def test_occ3d_needs_the_camera_mask(monkeypatch):
+    """Under the occ3d convention only camera-visible voxels count; a
+    sample without ``mask_camera`` is an error naming it, not a silent
+    count of nothing."""
+    from mmengine.config import Config
+    tool = load_tool('cylinder_ceiling.py')
+    cfg = Config.fromfile(OCCCYL)
+    cfg.test_evaluator.convention = 'occ3d'
+    cfg.test_evaluator.use_camera_mask = True
+    occ = np.zeros(tuple(cfg.grid_size), np.int64)
+    monkeypatch.setattr(tool, 'labelled_samples',
+                        lambda *a: iter([({'data_samples': {}}, occ)]))
+    with pytest.raises(ValueError, match=r'val sample 0: .*mask_camera of '
+                       r'shape \(200, 200, 16\), got none'):
+        tool.measure(cfg)
