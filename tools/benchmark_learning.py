@@ -560,31 +560,37 @@ def _best_val(row: dict) -> str:
     return f'{pct(best)} ({step})'
 
 
-def _weak_large_classes(row: dict) -> str:
+def _weak_names(row: dict) -> Optional[List[str]]:
     """Classes with >= LARGE_CLASS_VOXELS GT voxels at IoU <=
-    LARGE_CLASS_MIN_IOU ('none' when every large class is above it)."""
+    LARGE_CLASS_MIN_IOU; None when the run logged no GT voxel counts."""
     metrics = row['metrics']
     if not any(k.startswith('occ/gt_voxels/') and v is not None
                for k, v in metrics.items()):
-        return 'n/a'
-    weak = [name for name in large_classes(metrics)
+        return None
+    return [name for name in large_classes(metrics)
             if not metrics.get(f'occ/{name}', 0.0) > LARGE_CLASS_MIN_IOU]
-    return ', '.join(weak) or 'none'
+
+
+def _weak_large_classes(row: dict) -> str:
+    """:func:`_weak_names` as a table cell ('none' when every large class
+    is above the line, 'n/a' without counts)."""
+    weak = _weak_names(row)
+    return 'n/a' if weak is None else ', '.join(weak) or 'none'
 
 
 def _weak_class_confusions(row: dict) -> str:
     """For each weak large class, the two classes that take most of its
     GT voxels, e.g. ``'bicycle: empty 61 %, car 9 %'`` ('n/a' for a run
     tested before the confusion matrix was written)."""
+    weak = _weak_names(row)
+    if not weak:
+        return 'n/a' if weak is None else 'none'
     path = row.get('confusion_csv')
-    weak = _weak_large_classes(row)
-    if weak in ('n/a', 'none'):
-        return weak
     if not path or not osp.isfile(path):
         return 'n/a'
     names, confusion = read_confusion_csv(path)
     parts = []
-    for name in weak.split(', '):
+    for name in weak:
         went = largest_confusions(confusion, names.index(name))
         parts.append(f'{name}: ' + ', '.join(
             f'{names[c]} {share * 100:.0f} %' for c, share in went))

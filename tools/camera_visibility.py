@@ -23,11 +23,12 @@ import os.path as osp
 from typing import Dict, Sequence, Tuple
 
 import numpy as np
-from mmengine.config import Config, DictAction
+from mmengine.config import Config
 
 from projects.occ_common.datasets.nuscenes_classes import (OCC_CLASS_NAMES,
                                                            lidarseg_to_occ16)
 from projects.occ_common.datasets.synthetic import camera_label_path
+from projects.occ_common.utils.config_checks import CfgOptionsAction
 from projects.occ_common.utils.split_dataset import (add_split_arguments,
                                                      build_split_dataset,
                                                      load_tool_config)
@@ -47,7 +48,7 @@ def parse_args(argv=None):
                         help='grid laid over every image (default: the '
                         'small configs\' 12 x 20 feature map)')
     parser.add_argument('--json', default=None, help='write the numbers')
-    parser.add_argument('--cfg-options', nargs='+', action=DictAction,
+    parser.add_argument('--cfg-options', nargs='+', action=CfgOptionsAction,
                         help='config overrides, as for tools/test.py')
     return parser.parse_args(argv)
 

@@ -26,10 +26,10 @@ from typing import Dict, List, Sequence, Tuple
 
 import numpy as np
 import torch
-from mmengine.config import Config, DictAction
+from mmengine.config import Config
 
-from projects.occ_common.evaluation import (confusion_matrix, geometric_iou,
-                                            mean_iou, per_class_iou)
+from projects.occ_common.evaluation import OccupancyMetric
+from projects.occ_common.utils.config_checks import CfgOptionsAction
 from projects.occ_common.utils.split_dataset import (add_split_arguments,
                                                      labelled_samples,
                                                      load_tool_config)
@@ -51,13 +51,20 @@ def parse_args(argv=None):
     """Parse the command line."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('config', help='an OccCylindrical config')
-    parser.add_argument('--shapes', nargs='+', type=parse_shape,
-                        default=None, metavar='RxTxZ',
-                        help='cylinder shapes (default: the config\'s)')
+    parser.add_argument(
+        '--shapes',
+        nargs='+',
+        type=parse_shape,
+        default=None,
+        metavar='RxTxZ',
+        help='cylinder shapes (default: the config\'s)')
     add_split_arguments(parser)
     parser.add_argument('--json', default=None, help='write the numbers')
-    parser.add_argument('--cfg-options', nargs='+', action=DictAction,
-                        help='config overrides, as for tools/test.py')
+    parser.add_argument(
+        '--cfg-options',
+        nargs='+',
+        action=CfgOptionsAction,
+        help='config overrides, as for tools/test.py')
     return parser.parse_args(argv)
 
 
@@ -76,8 +83,9 @@ def cell_of_voxels(grid_shape: Sequence[int], pc_range: Sequence[float],
         np.ndarray: int64 flat cell index, -1 where the centre lies in no
         cell (a cylinder without clamping). Shape (X, Y, Z).
     """
-    index = np.stack(np.meshgrid(*[np.arange(n) for n in grid_shape],
-                                 indexing='ij'), axis=-1)
+    index = np.stack(
+        np.meshgrid(*[np.arange(n) for n in grid_shape], indexing='ij'),
+        axis=-1)
     centres = torch.from_numpy(voxel_centres(index, pc_range, voxel_size))
     cells = cylinder.flat_index(cartesian_to_cylindrical(centres))
     return cells.numpy()
@@ -104,9 +112,9 @@ def majority_labels(occ: np.ndarray, cells: np.ndarray, num_cells: int,
     labels = np.asarray(occ, np.int64).ravel()
     cell = np.asarray(cells, np.int64).ravel()
     votes = (labels != ignore_index) & (cell >= 0)
-    counts = np.bincount(cell[votes] * num_classes + labels[votes],
-                         minlength=num_cells * num_classes).reshape(
-                             num_cells, num_classes)
+    counts = np.bincount(
+        cell[votes] * num_classes + labels[votes],
+        minlength=num_cells * num_classes).reshape(num_cells, num_classes)
     # argmax takes the first of equal counts: ties go to the lower label.
     major = np.where(counts.any(1), counts.argmax(1), fill)
     out = np.where(cell >= 0, major[np.maximum(cell, 0)], fill)
@@ -128,57 +136,57 @@ def _cylinders(cfg: Config,
     ]
 
 
-def measure(cfg: Config, shapes: Sequence[Tuple[int, int, int]] = None,
-            split: str = 'val', data_root: str = None) -> Dict[str, dict]:
-    """Score the majority labels of every shape on a split.
+def _metric(cfg: Config) -> OccupancyMetric:
+    """The config's metric with its label rules only (convention, classes,
+    ignore label, camera mask), without subsets, ranges or files."""
+    rules = ('convention', 'class_names', 'ignore_index', 'use_camera_mask')
+    evaluator = cfg.test_evaluator
+    return OccupancyMetric(
+        **{k: evaluator[k]
+           for k in rules if k in evaluator})
+
+
+def measure(cfg: Config,
+            shapes: Sequence[Tuple[int, int, int]] = None,
+            split: str = 'val',
+            data_root: str = None) -> Dict[str, dict]:
+    """Score the majority labels of every shape on a split with the
+    config's metric (so its convention decides the empty class, the
+    ignored voxels and the camera mask).
 
     Returns:
         dict: Per shape ``'RxTxZ'``: ``IoU``, ``mIoU`` and ``classes``
         (name -> IoU, NaN where the class never occurs), in percent.
     """
-    metric = dict(cfg.test_evaluator)
-    convention = metric.get('convention', 'surroundocc')
-    names = list(cfg.class_names)
-    num_classes = len(names)
-    empty = 0 if convention == 'surroundocc' else num_classes - 1
-    ignore = metric.get('ignore_index', 255)
-    use_mask = convention == 'occ3d' and metric.get('use_camera_mask', True)
     cylinders = _cylinders(cfg, shapes)
+    metrics = [_metric(cfg) for _ in cylinders]
     grid = tuple(cfg.grid_size)
     cells = [
         cell_of_voxels(grid, cfg.point_cloud_range, cfg.voxel_size, c)
         for c in cylinders
     ]
-    totals = [np.zeros((num_classes, num_classes), np.int64) for _ in cells]
-    for index, (sample, occ) in enumerate(
-            labelled_samples(cfg, split, data_root)):
-        counted = occ != ignore
-        if use_mask:
-            mask = sample['data_samples'].get('mask_camera')
-            if mask is None or tuple(mask.shape) != occ.shape:
-                raise ValueError(
-                    f'{cfg.filename}, {split} sample {index}: the occ3d '
-                    'metric counts only camera-visible voxels; expected a '
-                    f'mask_camera of shape {occ.shape}, got ' +
-                    ('none' if mask is None else str(tuple(mask.shape))))
-            counted &= np.asarray(mask, bool)
-        for cylinder, cell, total in zip(cylinders, cells, totals):
+    for index, (sample,
+                occ) in enumerate(labelled_samples(cfg, split, data_root)):
+        data = sample['data_samples']
+        for cylinder, cell, metric in zip(cylinders, cells, metrics):
             pred = majority_labels(occ, cell, cylinder.num_voxels,
-                                   num_classes, ignore, empty)
-            total += confusion_matrix(
-                torch.from_numpy(occ[counted]),
-                torch.from_numpy(pred[counted]), num_classes).numpy()
-    semantic = [c for c in range(num_classes) if c != empty]
+                                   metric.num_classes, metric.ignore_index,
+                                   metric.empty_index)
+            metric.process({}, [
+                dict(
+                    gt_occ=occ,
+                    pred_occ=pred,
+                    mask_camera=data.get('mask_camera'),
+                    sample_idx=f'{split} sample {index}')
+            ])
     out = {}
-    for cylinder, total in zip(cylinders, totals):
-        key = 'x'.join(str(s) for s in cylinder.shape)
-        out[key] = dict(
-            IoU=geometric_iou(total, empty) * 100,
-            mIoU=mean_iou(total, semantic) * 100,
-            classes={
-                n: float(v) * 100
-                for n, v in zip(names, per_class_iou(total))
-            })
+    for cylinder, metric in zip(cylinders, metrics):
+        scores = metric.compute_metrics(metric.results)
+        out['x'.join(str(s) for s in cylinder.shape)] = dict(
+            IoU=scores['IoU'],
+            mIoU=scores['mIoU'],
+            classes={n: scores[n]
+                     for n in metric.class_names})
     return out
 
 
@@ -192,15 +200,17 @@ def main(argv=None) -> Dict[str, dict]:
     keys = list(out)
     print('  ' + 'cylinder'.ljust(22) + ''.join(k.rjust(14) for k in keys))
     for row in ('IoU', 'mIoU'):
-        print('  ' + row.ljust(22) +
-              ''.join(f'{out[k][row]:14.2f}' for k in keys))
+        print('  ' + row.ljust(22) + ''.join(f'{out[k][row]:14.2f}'
+                                             for k in keys))
     for name in out[keys[0]]['classes']:
-        print('  ' + name.ljust(22) + ''.join(
-            f'{out[k]["classes"][name]:14.2f}' for k in keys))
+        print('  ' + name.ljust(22) +
+              ''.join(f'{out[k]["classes"][name]:14.2f}' for k in keys))
     if args.json:
         with open(args.json, 'w') as f:
-            json.dump(dict(shapes=out, config=args.config,
-                           split=args.split), f, indent=1)
+            json.dump(
+                dict(shapes=out, config=args.config, split=args.split),
+                f,
+                indent=1)
     return out
 
 

@@ -20,9 +20,10 @@ import json
 from typing import Dict, Sequence
 
 import numpy as np
-from mmengine.config import Config, DictAction
+from mmengine.config import Config
 
 from projects.occ_common.transforms.point_labels import point_voxel_index
+from projects.occ_common.utils.config_checks import CfgOptionsAction
 from projects.occ_common.utils.split_dataset import (add_split_arguments,
                                                      labelled_samples,
                                                      load_tool_config)
@@ -37,7 +38,7 @@ def parse_args(argv=None):
     parser.add_argument('--near', type=float, default=20.0,
                         help='metres: the "near" share\'s horizontal range')
     parser.add_argument('--json', default=None, help='write the numbers')
-    parser.add_argument('--cfg-options', nargs='+', action=DictAction,
+    parser.add_argument('--cfg-options', nargs='+', action=CfgOptionsAction,
                         help='config overrides, as for tools/test.py')
     return parser.parse_args(argv)
 

@@ -104,8 +104,8 @@ def test_refusals():
 
 def test_occ3d_needs_the_camera_mask(monkeypatch):
     """Under the occ3d convention only camera-visible voxels count; a
-    sample without ``mask_camera`` is an error naming it, not a silent
-    count of nothing."""
+    sample without ``mask_camera`` is the metric's error naming it, not a
+    silent count of nothing."""
     from mmengine.config import Config
     tool = load_tool('cylinder_ceiling.py')
     cfg = Config.fromfile(OCCCYL)
@@ -114,6 +114,15 @@ def test_occ3d_needs_the_camera_mask(monkeypatch):
     occ = np.zeros(tuple(cfg.grid_size), np.int64)
     monkeypatch.setattr(tool, 'labelled_samples',
                         lambda *a: iter([({'data_samples': {}}, occ)]))
-    with pytest.raises(ValueError, match=r'val sample 0: .*mask_camera of '
-                       r'shape \(200, 200, 16\), got none'):
+    with pytest.raises(ValueError, match=r'sample val sample 0 has no '
+                       r'mask_camera \(occ3d, use_camera_mask=True\)'):
         tool.measure(cfg)
+
+
+def test_cfg_options_are_checked_as_in_test_py():
+    """The analysis tools merge --cfg-options through apply_cfg_options:
+    a string where the config has a list is refused, naming the key,
+    before any data is read."""
+    tool = load_tool('cylinder_ceiling.py')
+    with pytest.raises(ValueError, match="grid_size='big'"):
+        tool.main([OCCCYL, '--cfg-options', 'grid_size=big'])

@@ -43,16 +43,18 @@ def build_split_dataset(cfg, split: str = 'val',
 
 
 def load_tool_config(args: argparse.Namespace):
-    """``args.config`` with ``args.cfg_options`` merged in.
+    """``args.config`` with ``args.cfg_options`` checked and merged in, as
+    ``tools/train.py`` and ``tools/test.py`` do (:func:`apply_cfg_options`).
 
     ``Config.fromfile`` imports the config's ``custom_imports`` (the
     plugins), so the registries are filled afterwards.
     """
     from mmengine.config import Config
 
+    from .config_checks import apply_cfg_options
+
     cfg = Config.fromfile(args.config)
-    if args.cfg_options:
-        cfg.merge_from_dict(args.cfg_options)
+    apply_cfg_options(cfg, args)
     return cfg
 
 
