@@ -288,6 +288,31 @@ def test_ablation_runs_switch_their_module_off(name, expect):
         assert base.model.get(key) != value
 
 
+def test_rot90_run_turns_only_the_training_scenes():
+    """``occcyl-small-seg2d-nodepthsup-rot90`` is the run without depth
+    supervision plus one option, and that option lands on the training
+    pipeline's OccBEVAug (a list index: the test fails if the pipeline's
+    order moves it) with its flips still off; validation and test keep
+    their identity BEV transform."""
+    tool = _tool()
+    config, options = tool.RUNS['occcyl-small-seg2d-nodepthsup-rot90']
+    base_config, base_options = tool.RUNS['occcyl-small-seg2d-nodepthsup']
+    assert config == base_config
+    assert options[:len(base_options)] == base_options
+    cfg = Config.fromfile(osp.join(ROOT, config))
+    parser = argparse.ArgumentParser()
+    parser.add_argument('--o', nargs='+', action=DictAction)
+    cfg.merge_from_dict(parser.parse_args(['--o', *options]).o)
+    bev = [t for t in cfg.train_dataloader.dataset.pipeline
+           if t['type'] == 'OccBEVAug']
+    assert bev == [dict(type='OccBEVAug', flip_x_prob=0.0, flip_y_prob=0.0,
+                        rot90=True)]
+    for loader in ('val_dataloader', 'test_dataloader'):
+        bev = [t for t in cfg[loader].dataset.pipeline
+               if t['type'] == 'OccBEVAug']
+        assert bev == [dict(type='OccBEVAug', test_mode=True)]
+
+
 @pytest.mark.parametrize('argv', [
     ['--runs', 'occcyl-small', '--suffix', '-bs4'],
     ['--suffix', '-bs4', '--runs', 'occcyl-small'],
