@@ -135,3 +135,22 @@ def test_points_to_ego_frame():
     with pytest.raises(ValueError, match='twice'):
         PointsToEgoFrame()(out)
     assert repr(PointsToEgoFrame()) == 'PointsToEgoFrame()'
+
+
+def test_rot90_draws_only_quarter_turns():
+    """rot90=True (the benchmark's rot90 run) draws angles of exactly 0,
+    90, 180 and 270 degrees, all four in 200 draws (each missing with
+    probability (3/4)^200), and the draw turns the grid: the car voxel of
+    ``_state`` leaves (0, 1, 0) whenever the angle is not 0. Without
+    rot90 every angle is 0."""
+    np.random.seed(0)
+    aug = OccBEVAug(rot90=True, flip_x_prob=0.0, flip_y_prob=0.0)
+    angles = {aug.sample_params()['rotate'] for _ in range(200)}
+    assert angles == {0.0, 90.0, 180.0, 270.0}
+    plain = OccBEVAug(flip_x_prob=0.0, flip_y_prob=0.0)
+    assert {plain.sample_params()['rotate'] for _ in range(20)} == {0.0}
+    for _ in range(8):
+        out = aug(_state())
+        turned = out['bda_params']['rotate'] != 0.0
+        assert (out['gt_occ'][0, 1, 0] != 4) == turned
+        assert (out['gt_occ'] == 4).sum() == 1
