@@ -8,7 +8,8 @@ which installs the restricted checkpoint loader before anything is loaded
 and refuses a checkpoint with non-finite weights, or whose keys or shapes
 differ from the model's (unless ``--allow-key-mismatch``);
 ``--cfg-options`` and the config's top-level keys are checked by
-``config_checks``.
+``config_checks`` (an override of the wrong kind ends the run with one
+line and exit status 2).
 
 ``--format-only`` (the ``format_only`` of mmdet3d's metrics): the metric
 writes the predictions instead of scoring them (Occ3D ``<token>.npz`` and
@@ -28,9 +29,12 @@ from mmengine.registry import RUNNERS
 from mmengine.runner import Runner
 
 from projects.occ_common.utils.config_checks import (CfgOptionsAction,
-                                                     apply_cfg_options)
+                                                     apply_cfg_options,
+                                                     cfg_errors_exit)
 from projects.occ_common.utils.cpu_dist import (finalize_distributed,
                                                 setup_cpu_distributed)
+from projects.occ_common.utils.unlabelled_pipeline import (innermost_dataset,
+                                                           unlabelled_pipeline)
 
 
 def parse_args(argv=None):
@@ -105,12 +109,6 @@ def trigger_visualization_hook(cfg: Config, args) -> Config:
     return cfg
 
 
-#: Test-pipeline steps that only read labels or make training targets from
-#: them; --format-only drops them (nothing is scored, no prediction uses
-#: them, and the test split has no lidarseg).
-LABEL_ONLY_STEPS = ('LoadLidarSegLabels', 'PointsToSemanticMaps')
-
-
 def set_format_only(cfg: Config, args) -> None:
     """Point the metrics at the submission folder; with ``--format-only``
     also stop them scoring and the test pipeline reading labels."""
@@ -130,16 +128,11 @@ def set_format_only(cfg: Config, args) -> None:
     cfg.test_evaluator = evaluator
     if not args.format_only:
         return
+    # Nothing is scored, no prediction uses the labels, and the test split
+    # has no lidarseg: the pipeline reads none.
     cfg.test_dataloader = copy.deepcopy(cfg.test_dataloader)
-    dataset = cfg.test_dataloader.dataset
-    while 'pipeline' not in dataset and 'dataset' in dataset:
-        dataset = dataset.dataset  # wrappers
-    dataset.pipeline = [
-        dict(step, allow_unlabelled=True)
-        if step.get('type') == 'LoadOccupancyGT' else step
-        for step in dataset.pipeline
-        if step.get('type') not in LABEL_ONLY_STEPS
-    ]
+    dataset = innermost_dataset(cfg.test_dataloader.dataset)
+    dataset.pipeline = unlabelled_pipeline(dataset.pipeline)
 
 
 def build_cfg(args) -> Config:
@@ -178,7 +171,8 @@ def build_cfg(args) -> Config:
 def main(argv=None):
     """Build the runner from the config and run the test loop."""
     args = parse_args(argv)
-    cfg = build_cfg(args)
+    with cfg_errors_exit():
+        cfg = build_cfg(args)
     setup_cpu_distributed(cfg)
     if 'runner_type' not in cfg:
         runner = Runner.from_cfg(cfg)

@@ -4,7 +4,8 @@ The models, datasets and hooks come from the config's ``custom_imports``;
 the script itself imports only helpers of ``projects.occ_common.utils``
 (CPU process groups, config checks). Flags and behaviour follow mmdet3d
 1.4's script; ``--cfg-options`` and the config's top-level keys are
-checked first (``config_checks``), and ``--resume`` resumes from the
+checked first (``config_checks``; an override of the wrong kind ends the
+run with one line and exit status 2), and ``--resume`` resumes from the
 newest complete checkpoint of the work dir even without a
 ``last_checkpoint`` pointer (``CheckpointRecoveryHook`` of the configs).
 """
@@ -19,7 +20,8 @@ from mmengine.registry import RUNNERS
 from mmengine.runner import Runner
 
 from projects.occ_common.utils.config_checks import (CfgOptionsAction,
-                                                     apply_cfg_options)
+                                                     apply_cfg_options,
+                                                     cfg_errors_exit)
 from projects.occ_common.utils.cpu_dist import (finalize_distributed,
                                                 setup_cpu_distributed)
 
@@ -127,7 +129,8 @@ def build_cfg(args) -> Config:
 def main(argv=None):
     """Build the runner from the config and train."""
     args = parse_args(argv)
-    cfg = build_cfg(args)
+    with cfg_errors_exit():
+        cfg = build_cfg(args)
     setup_cpu_distributed(cfg)
     if 'runner_type' not in cfg:
         runner = Runner.from_cfg(cfg)

@@ -4,13 +4,19 @@
 ``default_hooks.visualization`` with ``draw=False``; ``tools/test.py
 --show-dir DIR`` sets ``draw=True`` and ``test_out_dir=DIR``, and the hook
 then writes ``{log_dir}/DIR/{sample}.png`` for every evaluated sample (an
-absolute ``DIR`` is used as is): GT, prediction and error map, top-down
-and in 3D (:func:`~projects.occ_common.visualization.render_data_sample`).
+absolute ``DIR`` is used as is), ``{sample}`` being
+``<scene_name>_<token>`` (:func:`~projects.occ_common.visualization.
+sample_name`): GT, prediction and error map, top-down and in 3D
+(:func:`~projects.occ_common.visualization.render_data_sample`).
 During validation, and in testing without ``test_out_dir``, the pictures
 go to the Runner's visualiser backends (``vis_data/`` of the log dir with
 mmengine's default ``LocalVisBackend``).
+
+The seconds spent drawing a batch are logged as ``{mode}/vis_time``; they
+are not part of ``data_time``: see :attr:`OccVisualizationHook.priority`.
 """
 import os.path as osp
+import time
 from typing import Optional, Sequence
 
 import numpy as np
@@ -59,7 +65,13 @@ class OccVisualizationHook(Hook):
             (360, 480).
     """
 
-    priority = 'NORMAL'
+    #: mmengine's ``IterTimerHook`` (``NORMAL``) restarts its clock in
+    #: ``after_*_iter`` and logs the time until the next ``before_*_iter``
+    #: as ``data_time``. Drawing after it (a ``NORMAL`` hook registered
+    #: later) put the drawing into the next batch's ``data_time``; drawing
+    #: before it keeps ``data_time`` to loading and counts the drawing in
+    #: the iteration's ``time`` (and so in the ETA), besides ``vis_time``.
+    priority = 'ABOVE_NORMAL'
 
     def __init__(self,
                  draw: bool = False,
@@ -151,9 +163,11 @@ class OccVisualizationHook(Hook):
 
     def _draw_batch(self, runner, mode: str, data_batch,
                     outputs: Optional[Sequence]) -> None:
-        """Render every ``interval``-th sample of the batch."""
+        """Render every ``interval``-th sample of the batch and log the
+        seconds it took as ``{mode}/vis_time``."""
         if not self.draw or not outputs:
             return
+        start = time.perf_counter()
         names, empty = self._classes(runner, mode)
         images = self._batch_images(data_batch, len(outputs))
         for i, sample in enumerate(outputs):
@@ -179,6 +193,8 @@ class OccVisualizationHook(Hook):
             else:
                 runner.visualizer.add_image(
                     f'{mode}_occ_{name}', picture, step=runner.iter)
+        runner.message_hub.update_scalar(f'{mode}/vis_time',
+                                         time.perf_counter() - start)
 
     def _batch_images(self, data_batch, size: int) -> list:
         """The packed camera images of each sample, or Nones."""

@@ -10,9 +10,13 @@ run these checks first:
 * :class:`CfgOptionsAction`: every ``--cfg-options`` item is
   ``KEY=VALUE`` with a non-empty key and a parsable value.
 * :func:`check_cfg_options`: an override of a value the config already
-  has keeps its kind (bool, integer, number, string, list / tuple);
-  ``None`` on either side and new keys are not checked. A number given
-  for a string is taken as the text typed (``data_root=2024``).
+  has keeps its kind (bool, integer, number, string, list / tuple, dict);
+  ``None`` on either side and new keys are not checked, but a new key
+  must lie below a dict (or an existing list item). A number given for a
+  string is taken as the text typed (``data_root=2024``).
+* :func:`cfg_errors_exit`: the tools end on such an override as argparse
+  ends on a malformed one: one line ``PROG: error: ...`` on stderr and
+  exit status 2, no traceback.
 * :func:`check_top_level_keys`: **the rule for unknown keys** is that a
   top-level key is an error when it is not read by mmengine's Runner or
   tools but lies within two edits (insert, delete, substitute, swap of
@@ -22,8 +26,11 @@ run these checks first:
   top level by design; a real typo of a Runner key is almost always one or
   two keystrokes away from it. Keys starting with ``_`` are never checked.
 """
+import contextlib
 import inspect
-from typing import Any, Dict, Iterable, List, Mapping, Optional
+import os.path as osp
+import sys
+from typing import Any, Dict, Iterable, Iterator, List, Mapping, Optional
 
 from mmengine.config import DictAction
 
@@ -100,6 +107,10 @@ def check_top_level_keys(keys: Iterable[str], filename: str) -> None:
             'within two edits of a Runner key.')
 
 
+class CfgOptionsError(ValueError):
+    """A ``--cfg-options`` item the config cannot take."""
+
+
 class CfgOptionsAction(DictAction):
     """``--cfg-options`` parser that names a malformed item.
 
@@ -153,6 +164,8 @@ def _kind(value: Any) -> Optional[str]:
         return 'string'
     if isinstance(value, (list, tuple)):
         return 'list'
+    if isinstance(value, Mapping):
+        return 'dict'
     return None
 
 
@@ -160,6 +173,56 @@ def _fits(kind: str, value: Any) -> bool:
     if kind == 'number':
         return isinstance(value, (int, float)) and not isinstance(value, bool)
     return _kind(value) == kind
+
+
+#: Longest ``repr`` of a replaced value quoted in a message; a longer one
+#: (a model's dict) is named by its kind alone, keeping the message to a
+#: line.
+MAX_QUOTED = 40
+
+
+def _article(kind: str) -> str:
+    """``'a string'``, ``'an integer'``."""
+    return f'an {kind}' if kind[0] in 'aeiou' else f'a {kind}'
+
+
+def _described(kind: str, value: Any) -> str:
+    """``'the integer 2'``, or ``'a dict'`` when its repr is long."""
+    text = repr(value)
+    if len(text) > MAX_QUOTED or '\n' in text:
+        return _article(kind)
+    return f'the {kind} {text}'
+
+
+def _parent_error(cfg: Mapping, key: str) -> Optional[str]:
+    """Why ``key`` cannot be set below its parents, or None.
+
+    mmengine merges ``a.b.c=1`` into ``a.b`` only when ``a.b`` is a dict
+    (or a list indexed by ``c``); anything else fails inside the merge
+    with a ``TypeError`` or ``IndexError``.
+    """
+    parts = key.split('.')
+    node: Any = cfg
+    for depth, part in enumerate(parts[:-1]):
+        if isinstance(node, (list, tuple)):
+            if not part.isdigit() or int(part) >= len(node):
+                where = '.'.join(parts[:depth])
+                items = 'item' if len(node) == 1 else 'items'
+                return (f'{where} is a list of {len(node)} {items}, which '
+                        f'has no item {part!r}')
+            node = node[int(part)]
+        elif hasattr(node, 'keys'):
+            if part not in node:
+                return None  # a new branch: mmengine creates it
+            node = node[part]
+        else:
+            break
+        if not (hasattr(node, 'keys') or isinstance(node, (list, tuple))):
+            where = '.'.join(parts[:depth + 1])
+            kind = _kind(node) or type(node).__name__
+            return (f'the config has {_described(kind, node)} at {where}, '
+                    'not a dict to set a key in')
+    return None
 
 
 def check_cfg_options(cfg: Mapping,
@@ -177,11 +240,17 @@ def check_cfg_options(cfg: Mapping,
         dict: ``options``, with numbers given for strings as typed.
 
     Raises:
-        ValueError: Naming each override of the wrong kind.
+        CfgOptionsError: A ``ValueError`` naming each override of the
+            wrong kind, or below a value that is not a dict.
     """
     raw = raw or {}
     checked, errors = dict(options), []
     for key, value in options.items():
+        given = f'{key}={raw.get(key, value)!r}'
+        parent = _parent_error(cfg, key)
+        if parent is not None:
+            errors.append(f'{given}, but {parent}')
+            continue
         old = _lookup(cfg, key)
         kind = None if old is _MISSING or old is None else _kind(old)
         if kind is None or value is None or _fits(kind, value):
@@ -190,13 +259,36 @@ def check_cfg_options(cfg: Mapping,
                                                  'number'):
             checked[key] = raw.get(key, str(value))
             continue
-        errors.append(f'{key}={raw.get(key, value)!r} (a '
-                      f'{_kind(value) or type(value).__name__}), but the '
-                      f'config has the {kind} {old!r} there')
+        errors.append(f'{given} ({_article(_kind(value) or "value")}), but '
+                      f'the config has {_described(kind, old)} there')
     if errors:
-        raise ValueError('--cfg-options of the wrong kind: ' +
-                         '; '.join(errors))
+        raise CfgOptionsError('--cfg-options of the wrong kind: ' +
+                              '; '.join(errors))
     return checked
+
+
+@contextlib.contextmanager
+def cfg_errors_exit(prog: Optional[str] = None) -> Iterator[None]:
+    """End a tool on a :class:`CfgOptionsError` as argparse ends on a bad
+    argument: ``PROG: error: MESSAGE`` on one line of stderr, status 2.
+
+    Args:
+        prog (str, optional): The program's name. Defaults to the running
+            script's file name.
+
+    Yields:
+        None: The tool's work runs in the ``with`` block.
+
+    Raises:
+        SystemExit: With code 2, on a ``CfgOptionsError``.
+    """
+    try:
+        yield
+    except CfgOptionsError as err:
+        prog = prog or osp.basename(sys.argv[0] or 'tool')
+        message = ' '.join(str(err).split())  # one line, whatever it held
+        sys.stderr.write(f'{prog}: error: {message}\n')
+        raise SystemExit(2) from None
 
 
 def apply_cfg_options(cfg, args, dest: str = 'cfg_options') -> List[str]:
@@ -209,19 +301,35 @@ def apply_cfg_options(cfg, args, dest: str = 'cfg_options') -> List[str]:
 
     Returns:
         list[str]: The overridden keys.
+
+    Raises:
+        ValueError: If the config has a top-level typo (see
+            :func:`check_top_level_keys`).
+        CfgOptionsError: A ``ValueError``, if an override has the wrong
+            kind, cannot be merged, or adds a top-level typo.
     """
     check_top_level_keys(cfg.keys(), cfg.filename or '<config>')
     options = getattr(args, dest, None)
     if not options:
         return []
+    option = f'--{dest.replace("_", "-")}'
     options = check_cfg_options(cfg, options,
                                 getattr(args, f'{dest}_raw', None))
-    cfg.merge_from_dict(options)
-    check_top_level_keys(cfg.keys(), f'--{dest.replace("_", "-")}')
+    try:
+        cfg.merge_from_dict(options)
+    except (TypeError, KeyError, IndexError, AssertionError) as err:
+        # What the checks above do not foresee still ends in one line.
+        raise CfgOptionsError(f'{option}: cannot merge {sorted(options)} '
+                              f'into the config ({err})') from err
+    try:
+        check_top_level_keys(cfg.keys(), option)
+    except ValueError as err:
+        raise CfgOptionsError(str(err)) from err
     return sorted(options)
 
 
 __all__ = [
-    'CfgOptionsAction', 'apply_cfg_options', 'check_cfg_options',
-    'check_top_level_keys', 'edit_distance', 'runner_keys'
+    'CfgOptionsAction', 'CfgOptionsError', 'apply_cfg_options',
+    'cfg_errors_exit', 'check_cfg_options', 'check_top_level_keys',
+    'edit_distance', 'runner_keys'
 ]

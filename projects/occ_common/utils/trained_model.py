@@ -29,11 +29,12 @@ def build_trained_model(config: str,
     from mmengine.registry import MODELS, init_default_scope
     from mmengine.runner import load_checkpoint
 
+    from .config_checks import check_cfg_options
     from .safe_pickle import install_checkpoint_loader
 
     cfg = Config.fromfile(config)
     if cfg_options:
-        cfg.merge_from_dict(cfg_options)
+        cfg.merge_from_dict(check_cfg_options(cfg, cfg_options))
     init_default_scope(cfg.get('default_scope', 'mmdet3d'))
     model = MODELS.build(cfg.model)
     # Nothing is installed on import: load through the restricted loader.

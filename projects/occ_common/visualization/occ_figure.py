@@ -10,7 +10,8 @@ plugin's modules must not pull in a plotting library).
 """
 import os
 import os.path as osp
-from typing import Dict, Optional, Sequence
+import re
+from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 from PIL import Image
@@ -24,6 +25,17 @@ from .voxel_view import render_voxels
 
 #: Cameras per row of the picture (nuScenes' six views as 2 x 3).
 CAMERAS_PER_ROW = 3
+
+#: Font size of the picture's title, in points.
+TITLE_FONTSIZE = 11
+
+#: Free space at each side of the title, in inches.
+TITLE_MARGIN = 0.15
+
+#: matplotlib's default margins of the panels (``figure.subplot.*``), in
+#: fractions of the figure: kept in inches when a long title takes more
+#: lines and the figure grows.
+PANELS_TOP, PANELS_BOTTOM = 0.88, 0.11
 
 
 def render_occ_figure(pred=None,
@@ -154,11 +166,69 @@ def _legend(grids: Dict[str, np.ndarray], palette: np.ndarray,
     return handles
 
 
-def _compose(views: Dict[str, tuple], cameras: Optional[np.ndarray],
-             legend: list, heading: str, dpi: int) -> np.ndarray:
-    """Lay the rendered views out on one Agg canvas."""
+def _wrap_title(text: str, width_px: float, renderer, font) -> List[str]:
+    """``text`` broken into lines no wider than ``width_px``.
+
+    Lines break between phrases first (at ``'   '`` and after ``', '``, so
+    ``'false positive 3'`` stays together), then between words; a word
+    wider than a line (a long file name) is cut between characters.
+
+    Args:
+        text (str): The title.
+        width_px (float): Room of a line, in pixels of ``renderer``.
+        renderer (RendererAgg): Measures the text.
+        font (FontProperties): The title's font.
+
+    Returns:
+        list[str]: The lines, at least one.
+    """
+
+    def width(line: str) -> float:
+        return renderer.get_text_width_height_descent(line, font, False)[0]
+
+    def pack(pieces, cut) -> List[str]:
+        """Greedy lines of ``(separator, piece)`` pairs; ``cut`` splits a
+        piece too wide for a line into smaller pairs."""
+        lines, line = [], ''
+        for sep, piece in pieces:
+            if line and width(line + sep + piece) <= width_px:
+                line += sep + piece
+                continue
+            if line:
+                lines.append(line)
+            if cut is None or width(piece) <= width_px:
+                line = piece
+                continue
+            *full, line = cut(piece)
+            lines += full
+        return lines + [line]
+
+    def chars(word: str) -> List[str]:
+        return pack([('', char) for char in word], None)
+
+    def words(phrase: str) -> List[str]:
+        return pack(re.findall(r'(\s*)(\S+)', phrase), chars)
+
+    parts = re.split(r'(   |(?<=,) )', text)
+    return pack([('', parts[0])] + list(zip(parts[1::2], parts[2::2])),
+                words)
+
+
+def _figure(views: Dict[str, tuple], cameras: Optional[np.ndarray],
+            legend: list, heading: str, dpi: int):
+    """Lay the rendered views out on a Figure with an Agg canvas.
+
+    The title is wrapped onto as many lines as the figure's width needs
+    (centred, one long line used to run past both sides of the picture),
+    and the figure grows by the extra lines so the panels keep their size.
+
+    Returns:
+        matplotlib.figure.Figure: Drawn once; ``fig.texts[0]`` is the title
+        when ``heading`` is not empty.
+    """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+    from matplotlib.font_manager import FontProperties
     columns = len(views)
     camera_rows = 0 if cameras is None else -(-len(cameras) //
                                               CAMERAS_PER_ROW)
@@ -169,11 +239,21 @@ def _compose(views: Dict[str, tuple], cameras: Optional[np.ndarray],
     width = 4.0 * columns + 2.2
     height = 7.0 + camera_height + 0.4
     fig = Figure(figsize=(width, height), dpi=dpi)
-    FigureCanvasAgg(fig)
+    canvas = FigureCanvasAgg(fig)
+    lines = []
+    if heading:
+        font = FontProperties(size=TITLE_FONTSIZE)
+        lines = _wrap_title(heading, (width - 2 * TITLE_MARGIN) * dpi,
+                            canvas.get_renderer(), font)
+    # matplotlib's line spacing is 1.2 font sizes; points -> inches.
+    extra = max(len(lines) - 1, 0) * 1.2 * TITLE_FONTSIZE / 72
+    fig.set_size_inches(width, height + extra)
     ratios = [camera_height] * bool(camera_rows) + [3.5, 3.5]
     grid = fig.add_gridspec(
         len(ratios), columns + 1, height_ratios=ratios,
-        width_ratios=[4.0] * columns + [2.2])
+        width_ratios=[4.0] * columns + [2.2],
+        top=1 - ((1 - PANELS_TOP) * height + extra) / (height + extra),
+        bottom=PANELS_BOTTOM * height / (height + extra))
     row0 = 0
     if cameras is not None:
         sub = grid[0, :columns].subgridspec(camera_rows, CAMERAS_PER_ROW)
@@ -200,9 +280,16 @@ def _compose(views: Dict[str, tuple], cameras: Optional[np.ndarray],
     if legend:
         legend_ax.legend(handles=legend, loc='center left', fontsize=9,
                          frameon=False)
-    if heading:
-        fig.suptitle(heading, fontsize=11)
-    fig.canvas.draw()
+    if lines:
+        fig.suptitle('\n'.join(lines), fontsize=TITLE_FONTSIZE)
+    canvas.draw()
+    return fig
+
+
+def _compose(views: Dict[str, tuple], cameras: Optional[np.ndarray],
+             legend: list, heading: str, dpi: int) -> np.ndarray:
+    """The picture of :func:`_figure`, Shape (H, W, 3), uint8."""
+    fig = _figure(views, cameras, legend, heading, dpi)
     return np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
 
 

@@ -23,14 +23,35 @@ def sample_field(sample, key: str, default=None):
     return getattr(sample, key, default)
 
 
+def _file_safe(value) -> str:
+    """``value`` as text with every character but ``[A-Za-z0-9-_.]`` as
+    ``_``."""
+    return ''.join(ch if ch.isalnum() or ch in '-_.' else '_'
+                   for ch in str(value))
+
+
 def sample_name(sample, fallback: str) -> str:
-    """A file-name-safe name: the sample's ``sample_idx`` or ``token``."""
-    for key in ('sample_idx', 'token'):
-        value = sample_field(sample, key)
-        if value is not None:
-            return ''.join(ch if ch.isalnum() or ch in '-_.' else '_'
-                           for ch in str(value))
-    return fallback
+    """A file-name-safe name of a sample, unique within a dataset.
+
+    ``<scene_name>_<token>`` when the metainfo has both (the packed nuScenes
+    and synthetic samples: ``scene-0061_ca9a282c9e77460f8360f564131a8af5``),
+    ``<token>`` without a scene name, else the ``sample_idx`` (the index in
+    the info file, or a saved grid's file name), else ``fallback``.
+
+    Args:
+        sample (BaseDataElement | dict): A data sample or a dict.
+        fallback (str): The name of a sample that carries none.
+
+    Returns:
+        str: The name.
+    """
+    token = sample_field(sample, 'token')
+    if token is not None:
+        scene = sample_field(sample, 'scene_name')
+        name = str(token) if scene is None else f'{scene}_{token}'
+        return _file_safe(name)
+    index = sample_field(sample, 'sample_idx')
+    return fallback if index is None else _file_safe(index)
 
 
 def camera_images(img, bgr: bool = True) -> np.ndarray:
@@ -118,6 +139,11 @@ def render_data_sample(sample,
     if img is not None and all(v is not None for v in geometry):
         images = camera_images(img, bgr)
         lidar2img = np.asarray(lidar2img, dtype=np.float64)
+        # A temporal config packs the previous key frames' views after the
+        # current ones (LoadPreviousKeyFrames), and lidar2img projects into
+        # the current views only: draw those.
+        if len(images) > len(lidar2img) and len(images) % len(lidar2img) == 0:
+            images = images[:len(lidar2img)]
     return render_occ_figure(
         pred,
         gt,

@@ -1,11 +1,15 @@
 """OccVisualizationHook writes one picture per evaluated sample."""
 import logging
 import os
+import os.path as osp
+import time
 import types
+import uuid
 
 import numpy as np
 import pytest
 import torch
+from mmengine.logging import MessageHub
 from mmengine.structures import BaseDataElement
 
 from projects.occ_common.evaluation import OccupancyMetric
@@ -13,6 +17,9 @@ from projects.occ_common.hooks import OccVisualizationHook
 
 NAMES = ('empty', 'car', 'road')
 FAST = dict(view_size=(40, 60))
+ROOT = osp.dirname(osp.dirname(osp.dirname(osp.dirname(
+    osp.abspath(__file__)))))
+TOY_CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ.py')
 
 
 class _Visualizer:
@@ -34,14 +41,15 @@ def _runner(log_dir, metrics=(), classes=NAMES):
     return types.SimpleNamespace(
         log_dir=str(log_dir), logger=logging.getLogger('occ_vis_test'),
         test_loop=loop, val_loop=loop, rank=0, iter=11,
-        visualizer=_Visualizer())
+        visualizer=_Visualizer(),
+        message_hub=MessageHub.get_instance(f'occ_vis_{uuid.uuid4().hex}'))
 
 
-def _samples(*indices):
+def _samples(*indices, **metainfo):
     """Data samples with a 8x8x4 GT (road floor) and a prediction."""
     out = []
     for idx in indices:
-        sample = BaseDataElement(metainfo=dict(sample_idx=idx))
+        sample = BaseDataElement(metainfo=dict(sample_idx=idx, **metainfo))
         gt = torch.zeros(8, 8, 4, dtype=torch.long)
         gt[:, :, 0] = 2
         sample.gt_occ = gt
@@ -59,6 +67,23 @@ def test_test_mode_writes_one_png_per_sample(tmp_path):
     hook.after_test_iter(runner, 1, outputs=_samples(2))
     assert sorted(os.listdir(tmp_path / 'show')) == [
         '0.png', '1.png', '2.png']
+
+
+def test_pictures_are_named_after_scene_and_token(tmp_path):
+    """``<scene_name>_<token>.png``, ``<token>.png`` without a scene name,
+    ``<sample_idx>.png`` without a token (before: always sample_idx, the
+    index in the info file, so 0.png for the first sample of every
+    split)."""
+    token = 'ca9a282c9e77460f8360f564131a8af5'
+    hook = OccVisualizationHook(draw=True, test_out_dir='show', **FAST)
+    runner = _runner(tmp_path)
+    hook.before_test(runner)
+    hook.after_test_iter(runner, 0, outputs=_samples(
+        0, token=token, scene_name='scene-0061'))
+    hook.after_test_iter(runner, 1, outputs=_samples(1, token='t/1'))
+    hook.after_test_iter(runner, 2, outputs=_samples(2))
+    assert sorted(os.listdir(tmp_path / 'show')) == [
+        '2.png', f'scene-0061_{token}.png', 't_1.png']
 
 
 def test_interval_and_draw_false(tmp_path):
@@ -134,3 +159,45 @@ def test_bad_arguments_are_rejected():
         OccVisualizationHook(draw_gt=False, draw_pred=False)
     with pytest.raises(ValueError, match="'kitti'"):
         OccVisualizationHook(convention='kitti')
+
+
+def test_drawing_time_is_vis_time_not_data_time(tmp_path, monkeypatch):
+    """A Runner testing the toy config (4 samples, batch 1) with a drawing
+    that sleeps 0.2 s per sample.
+
+    mmengine's IterTimerHook logs as data_time the time from its own
+    after_test_iter to the next before_test_iter. When the drawing ran
+    after the timer (both NORMAL, the hook registered later), batches 2-4
+    had data_time >= 0.2 s; now it runs before it: data_time is the toy
+    loading (milliseconds), each batch logs vis_time >= 0.2 s, and the
+    iteration's time, which the ETA uses, includes the drawing.
+    """
+    from mmengine.config import Config
+    from mmengine.runner import Runner
+
+    from projects.occ_common.hooks import occ_visualization_hook
+
+    sleep = 0.2
+
+    def slow_render(*args, **kwargs):
+        time.sleep(sleep)
+        return np.zeros((4, 4, 3), np.uint8)
+
+    monkeypatch.setattr(occ_visualization_hook, 'render_data_sample',
+                        slow_render)
+    cfg = Config.fromfile(TOY_CONFIG)
+    cfg.work_dir = str(tmp_path)
+    cfg.experiment_name = f'vis_time_{uuid.uuid4().hex}'
+    cfg.test_dataloader.batch_size = 1
+    cfg.default_hooks.visualization.update(draw=True, test_out_dir='show')
+    runner = Runner.from_cfg(cfg)
+    runner.test()
+    hub = runner.message_hub
+    data_time = hub.get_scalar('test/data_time').data[0]
+    vis_time = hub.get_scalar('test/vis_time').data[0]
+    iter_time = hub.get_scalar('test/time').data[0]
+    assert len(data_time) == len(vis_time) == len(iter_time) == 4
+    assert data_time.max() < sleep / 2, data_time
+    assert vis_time.min() >= sleep, vis_time
+    assert iter_time.min() >= sleep, iter_time
+    assert len(os.listdir(osp.join(runner.log_dir, 'show'))) == 4

@@ -55,6 +55,24 @@ def test_cameras_add_a_row():
     assert with_cams.shape[0] - plain.shape[0] == 2 * 40
 
 
+def test_temporal_sample_draws_the_current_views():
+    """A two-frame config packs 4 views (the current 2, then the previous
+    2) with the 2 current projections: the picture is that of the current
+    2 views alone (before: 'Expected lidar2img of shape (4, 4, 4)')."""
+    pred, gt = _grids()
+    cam2img, lidar2cam = ring_camera_rig(2, (32, 64), 32.0)
+    sample = dict(pred_occ=pred, gt_occ=gt,
+                  lidar2img=(cam2img @ lidar2cam).numpy(),
+                  occ_pc_range=(-4, -4, -1, 4, 4, 1),
+                  occ_voxel_size=(1, 1, 0.5))
+    current = torch.full((2, 3, 32, 64), 200, dtype=torch.uint8)
+    previous = torch.zeros((2, 3, 32, 64), dtype=torch.uint8)
+    both = render_data_sample(sample, NAMES, 0,
+                              img=torch.cat([current, previous]), **SMALL)
+    alone = render_data_sample(sample, NAMES, 0, img=current, **SMALL)
+    assert np.array_equal(both, alone)
+
+
 def test_data_sample_with_tensors_renders():
     """A BaseDataElement with tensor grids and metainfo works as a dict."""
     pred, gt = _grids()
