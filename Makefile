@@ -1,8 +1,8 @@
 # The README's two commands: `make demo` and `make test`. Both set up the
-# pinned environment first (tools/setup_env.sh; a no-op once it is current).
+# pinned environment first (tools/misc/setup_env.sh; a no-op once it is current).
 # `make setup VENV=/path/to/env` completes an existing (e.g. CUDA)
 # environment, keeping its torch, mmcv and spconv-cuXXX where they fit;
-# PYTHON=python3.10 picks the interpreter of a new one (docs/install.md).
+# PYTHON=python3.10 picks the interpreter of a new one (docs/get_started.md).
 VENV ?= .venv
 PY := $(VENV)/bin/python
 export VENV
@@ -10,11 +10,11 @@ export VENV
 .PHONY: setup test lint demo clean-env
 
 setup:
-	@bash tools/setup_env.sh
+	@bash tools/misc/setup_env.sh
 
 lint: setup
-	$(PY) -m flake8 projects tools tests configs
-	$(PY) -m isort --check-only --diff projects tools tests configs
+	$(PY) -m flake8 projects tools tests configs demo
+	$(PY) -m isort --check-only --diff projects tools tests configs demo
 
 # Two pytest-xdist workers of one thread each (tests/conftest.py), a module
 # per worker at a time so that module fixtures are built once: 8.6 minutes
@@ -24,9 +24,9 @@ test: lint
 	$(PY) -m pytest tests -n $(TEST_WORKERS) --dist loadscope
 
 # Synthetic world -> train and evaluate both tiny models -> table + pictures
-# in demo_out/ (see README). DEMO_ARGS passes options to tools/demo.py.
+# in demo_out/ (see README). DEMO_ARGS passes options to demo/synthetic_demo.py.
 demo: setup
-	$(PY) tools/demo.py $(DEMO_ARGS)
+	$(PY) demo/synthetic_demo.py $(DEMO_ARGS)
 
 clean-env:
 	rm -rf $(VENV)

@@ -1,4 +1,4 @@
-"""The README's first command: synthetic world -> two trained models -> table.
+"""What ``make demo`` runs: synthetic world -> two trained models -> table.
 
 ``make demo`` runs this after setting up the environment. It
 
@@ -82,8 +82,8 @@ def parse_args(argv=None):
 def evaluate_untrained(config: str, work_dir: str, *options: str) -> None:
     """Test the freshly initialised model of ``config`` (no checkpoint).
 
-    Runs in its own process (``tools/demo.py --baseline ...``) so that its
-    Runner and logger do not mix with the demo's steps.
+    Runs in its own process (``demo/synthetic_demo.py --baseline ...``) so
+    that its Runner and logger do not mix with the demo's steps.
     """
     from mmengine.config import Config, DictAction
     from mmengine.runner import Runner
@@ -176,20 +176,20 @@ def main(argv=None):
         shutil.rmtree(work, ignore_errors=True)
         data = data_options(data_root)
 
-        run(tool('demo.py') +
+        run(tool('demo/synthetic_demo.py') +
             ['--baseline', config, osp.join(work, 'untrained')] + data +
             [COUNTS], log_path)
         untrained = last_metrics(osp.join(work, 'untrained'))
 
         tic = time.time()
-        run(tool('train.py') + [
+        run(tool('tools/train.py') + [
             config, '--work-dir',
             osp.join(work, 'train'), '--cfg-options'
         ] + schedule + data, log_path)
         train_s = time.time() - tic
 
         pictures = osp.join(out, 'pictures', slug)
-        run(tool('test.py') + [
+        run(tool('tools/test.py') + [
             config,
             osp.join(work, 'train', f'epoch_{epochs}.pth'), '--work-dir',
             osp.join(work, 'test'), '--show-dir', pictures,

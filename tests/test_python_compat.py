@@ -28,7 +28,7 @@ NEWER_STDLIB = {
 
 
 def _sources():
-    for top in ('projects', 'tools', 'configs', 'tests'):
+    for top in ('projects', 'tools', 'configs', 'tests', 'demo'):
         for folder, _, files in os.walk(osp.join(ROOT, top)):
             for name in sorted(files):
                 if name.endswith('.py'):
@@ -128,7 +128,7 @@ def test_the_checks_accept_3_9_code(snippet):
 
 def test_project_code_runs_on_python_3_9():
     assert len(SOURCES) > 150
-    assert {'tools/env_check.py', 'projects/occ_common/__init__.py',
+    assert {'tools/misc/env_check.py', 'projects/occ_common/__init__.py',
             'tests/test_python_compat.py'} <= set(SOURCES)
     found = []
     for path in SOURCES:

@@ -46,15 +46,16 @@ def test_tiny_config_trains_and_tests(path, synthetic_root, tmp_path):
         for split in ('train', 'val', 'test')
     ]
     work_dir = str(tmp_path / 'work')
-    proc = run_tool('train.py', path, '--work-dir', work_dir, '--cfg-options',
-                    'train_cfg.max_epochs=4', 'train_cfg.val_interval=4',
+    proc = run_tool('tools/train.py', path, '--work-dir', work_dir,
+                    '--cfg-options', 'train_cfg.max_epochs=4',
+                    'train_cfg.val_interval=4',
                     'default_hooks.checkpoint.interval=4', *data)
     assert proc.returncode == 0, proc.stderr[-3000:]
     losses = train_losses(work_dir)
     assert len(losses) == 8
     assert sum(losses[-2:]) < sum(losses[:2])
-    proc = run_tool('test.py', path, osp.join(work_dir,
-                                              'epoch_4.pth'), '--work-dir',
+    proc = run_tool('tools/test.py', path,
+                    osp.join(work_dir, 'epoch_4.pth'), '--work-dir',
                     str(tmp_path / 'test'), '--cfg-options', *data)
     assert proc.returncode == 0, proc.stderr[-3000:]
     metrics = last_test_metrics(str(tmp_path / 'test'))
@@ -63,7 +64,8 @@ def test_tiny_config_trains_and_tests(path, synthetic_root, tmp_path):
     # camera mask); IoU is occupied vs empty, in [0, 100): 8 iterations are
     # too few to require occupied predictions (the tiny OccCylindrical,
     # warming up its learning rate, still predicts every voxel empty after
-    # them: IoU 0). That the models learn is tools/benchmark_learning.py's
+    # them: IoU 0). That the models learn is
+    # tools/analysis_tools/benchmark_learning.py's
     # business; this test checks that they train and are scored.
     cfg = Config.fromfile(path)
     names = [n for i, n in enumerate(cfg.class_names) if i != cfg.empty_index]

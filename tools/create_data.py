@@ -6,7 +6,7 @@ Usage (mmdet3d 1.x ``tools/create_data.py`` style)::
     # and Occ3D labels in data/nuscenes/gts
     python tools/create_data.py nuscenes --root-path data/nuscenes \\
         --version v1.0-trainval --max-sweeps 10
-    # a synthetic world (tools/create_synthetic_nuscenes.py)
+    # a synthetic world (tools/dataset_converters/create_synthetic_nuscenes.py)
     python tools/create_data.py nuscenes --root-path data/synthetic_nuscenes \\
         --version v1.0-mini
     # mmdet3d's own info files, extended with the occupancy label paths

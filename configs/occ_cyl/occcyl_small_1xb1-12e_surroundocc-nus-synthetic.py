@@ -1,7 +1,7 @@
 # A small OccCylindrical for the held-out learning benchmark
-# (tools/benchmark_learning.py): the tiny model with a cylinder twice as
-# fine in radius and azimuth, twice the image side, finer depth bins, twice
-# the widths and a GroupNorm image branch, trained with a warm-up and a
+# (tools/analysis_tools/benchmark_learning.py): the tiny model with a cylinder
+# twice as fine in radius and azimuth, twice the image side, finer depth bins,
+# twice the widths and a GroupNorm image branch, trained with a warm-up and a
 # cosine decay, sized so that 2 CPU cores train it in about an hour.
 _base_ = ['./occcyl_tiny_1xb1-6e_surroundocc-nus-synthetic.py']
 
@@ -85,22 +85,21 @@ model = dict(
     # the planes ahead of sampling them).
     occ_head=dict(
         in_channels=_plane_channels, hidden_channels=_plane_channels))
-# The depth loss keeps the paper's weight 3 (eq. 19, from the base). With
-# the BN image branch of before, it left the cameras no use in the
-# benchmark's hour: mean images instead of the real ones scored the same
-# (65.2 / 20.3 against 65.1 / 20.1 IoU / mIoU), while at weight 0.3 the
-# cameras added 2.2 mIoU (66.4 / 24.4) and without the loss 6.4 (67.1 /
-# 25.9); with GN the two tie (above), and at patch stride 1 too: two-seed
-# means 71.71 / 33.94 with the loss, 72.11 / 34.20 without (seed 0 73.36 /
-# 35.22 against 71.26 / 34.62, seed 1 70.87 / 33.18 against 72.17 /
-# 33.26). At lr 4e-3 (below) the run without the loss scored higher in
-# both seeds: 73.33 / 36.81 and 72.27 / 36.82 against 73.26 / 36.43 and
-# 71.80 / 35.20 (means 72.80 / 36.82 against 72.53 / 35.81); see README,
-# "Do the models learn?". With 1.5x the iterations (2496, seed 0) the two
-# tie: 74.17 / 38.04 with the loss, 74.12 / 38.22 without. The config
-# keeps the paper's weight, the value its Table V measured on nuScenes;
-# on the synthetic world the loss has not helped at any setting tried
-# (see the BN numbers above).
+# The depth loss keeps the paper's weight 3 (eq. 19, from the base). With the
+# BN image branch of before, it left the cameras no use in the benchmark's
+# hour: mean images instead of the real ones scored the same (65.2 / 20.3
+# against 65.1 / 20.1 IoU / mIoU), while at weight 0.3 the cameras added 2.2
+# mIoU (66.4 / 24.4) and without the loss 6.4 (67.1 / 25.9); with GN the two
+# tie (above), and at patch stride 1 too: two-seed means 71.71 / 33.94 with the
+# loss, 72.11 / 34.20 without (seed 0 73.36 / 35.22 against 71.26 / 34.62, seed
+# 1 70.87 / 33.18 against 72.17 / 33.26). At lr 4e-3 (below) the run without
+# the loss scored higher in both seeds: 73.33 / 36.81 and 72.27 / 36.82 against
+# 73.26 / 36.43 and 71.80 / 35.20 (means 72.80 / 36.82 against 72.53 / 35.81);
+# see docs/reports/learning_benchmark.md. With 1.5x the iterations (2496, seed
+# 0) the two tie: 74.17 / 38.04 with the loss, 74.12 / 38.22 without. The
+# config keeps the paper's weight, the value its Table V measured on nuScenes;
+# on the synthetic world the loss has not helped at any setting tried (see the
+# BN numbers above).
 
 # 192x320 images: a 12x20 feature map (the tiny config's is 6x10).
 img_size = (192, 320)
@@ -118,7 +117,7 @@ _train_only = dict(OccBEVAug=dict(flip_x_prob=0.0, flip_y_prob=0.0))
 # between training and held-out scenes (other flat 38.7 against 5.6 IoU at
 # 1.5x the iterations) and did not move it (issue 14, stop 37): seed 0
 # tracked the curve of the run without it (31.7 against 31.0 mIoU at 900
-# iterations, 35.35 against 35.3 at 1200, read off README's curve; other
+# iterations, 35.35 against 35.3 at 1200, read off the report's curve; other
 # flat 8.7 at the end), and seed 1 ended at 34.21 (other flat 13.7) after
 # the 1204 iterations its hour allowed on a slower host.
 train_pipeline = [

@@ -57,7 +57,8 @@ model = dict(
         mid_channels=_bev_channels,
         # Departure for a short CPU budget: FlashOcc's masked cross-entropy
         # alone collapses to "ground and free" (measured with
-        # tools/benchmark_learning.py: IoU 62.08, the ground layer exactly,
+        # tools/analysis_tools/benchmark_learning.py: IoU 62.08, the ground
+        # layer exactly,
         # mIoU 6.4 after 100 and 200 iterations; 2.3 % of the camera-visible
         # voxels are occupied). Lovasz and the scene-class affinity terms
         # (OccCylindrical's eq. 18 set) optimise per-class IoU directly.

@@ -1,5 +1,5 @@
-"""tools/demo.py: the table line that tells whether each large class was
-learned."""
+"""demo/synthetic_demo.py: the table line that tells whether each large class
+was learned."""
 import argparse
 
 from mmengine.config import Config, DictAction
@@ -12,7 +12,7 @@ def test_unlearned_large_classes_needs_a_gain_of_five_points():
     """Large classes (>= 1,000 GT voxels): car 0.2 -> 30.0 gained; road
     40.0 -> 44.0 gained only 4 points; bicycle (300 voxels) is not large
     whatever its IoU; free is never listed."""
-    demo = load_tool('demo.py')
+    demo = load_tool('demo/synthetic_demo.py')
     counts = {'occ/gt_voxels/car': 5000, 'occ/gt_voxels/road': 90000,
               'occ/gt_voxels/bicycle': 300, 'occ/gt_voxels/free': 10**6}
     row = dict(
@@ -33,7 +33,7 @@ def test_schedule_options_stretch_the_schedule_to_the_epochs():
     take round(12.5) = 12 iterations; trained 30 (2.5x), the cosine ends at
     epoch 30 (not 18 epochs at 0) and the warm-up takes 125. Applied the way
     tools/train.py applies --cfg-options."""
-    demo = load_tool('demo.py')
+    demo = load_tool('demo/synthetic_demo.py')
     config = ('configs/occ_cyl/'
               'occcyl_small_1xb1-12e_surroundocc-nus-synthetic.py')
     for epochs, warmup in ((3, 12), (30, 125)):
@@ -59,7 +59,7 @@ def test_schedule_options_scale_milestones():
     [20, 23] of 24 epochs, travels as one shell word that mmengine reads
     back as a list: at 12 epochs [10, 12] (23 * 0.5 = 11.5 rounds to 12)
     and the 500-iteration warm-up 250."""
-    demo = load_tool('demo.py')
+    demo = load_tool('demo/synthetic_demo.py')
     config = 'configs/occ_cyl/occcyl_r50-swins_3xb1-24e_surroundocc-nus.py'
     options = demo.schedule_options(config, 12)
     assert 'param_scheduler.1.milestones=[10,12]' in options
@@ -79,7 +79,7 @@ def test_default_demo_trains_384_and_240_iterations_on_24_samples():
     (batch 1) and SDG-Fusion's 10 are 240. Each model gets its own epochs
     (not its config's 12 and 20); ``--epochs`` overrides them for the
     models that ``--models`` picks."""
-    demo = load_tool('demo.py')
+    demo = load_tool('demo/synthetic_demo.py')
     args = demo.parse_args([])
     scenes = [f'scene-{i:04d}' for i in range(args.scenes)]
     split = nuscenes_occ_converter.split_scenes(

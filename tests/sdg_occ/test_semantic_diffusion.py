@@ -122,7 +122,7 @@ def synthetic_samples(tmp_path_factory):
     register_all_modules(init_default_scope=True)
     root = make_tiny_world(
         str(tmp_path_factory.mktemp('sdg_world')), image_size=(352, 198))
-    load_tool('create_data.py').main(
+    load_tool('tools/create_data.py').main(
         ['nuscenes', '--root-path', root, '--version', 'v1.0-mini'])
     cfg = Config.fromfile(
         f'{REPO_ROOT}/configs/sdg_occ/'

@@ -1,4 +1,5 @@
-"""tools/benchmark.py on the toy config: keys, counts and ratios."""
+"""tools/analysis_tools/benchmark.py on the toy config: keys, counts and
+ratios."""
 import json
 import os.path as osp
 
@@ -15,7 +16,7 @@ SDG_CONFIG = osp.join(ROOT, 'configs', 'sdg_occ',
 
 
 def _tool():
-    return load_tool('benchmark.py')
+    return load_tool('tools/analysis_tools/benchmark.py')
 
 
 def test_single_model_json(tmp_path, capsys):

@@ -1,4 +1,5 @@
-"""tools/benchmark_learning.py: budget rewrite, resume, time limit, reuse.
+"""tools/analysis_tools/benchmark_learning.py: budget rewrite, resume, time
+limit, reuse.
 
 The training runs use the toy config (tests/data/configs/toy_occ.py: 8
 training samples in batches of 2, so 4 iterations per epoch) in child
@@ -26,7 +27,7 @@ CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ.py')
 
 
 def _tool():
-    return load_tool('benchmark_learning.py')
+    return load_tool('tools/analysis_tools/benchmark_learning.py')
 
 
 def _epoch_cfg():
@@ -83,7 +84,8 @@ def _spec(work_dir, iters, max_minutes=None, max_cpu_minutes=None):
 
 def _train(spec):
     proc = subprocess.run(
-        [sys.executable, osp.join(ROOT, 'tools', 'benchmark_learning.py'),
+        [sys.executable,
+         osp.join(ROOT, 'tools', 'analysis_tools', 'benchmark_learning.py'),
          '--train-one', json.dumps(spec)], cwd=ROOT, capture_output=True,
         text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-3000:]

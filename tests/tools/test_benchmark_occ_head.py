@@ -1,4 +1,5 @@
-"""tools/benchmark_occ_head.py: the head's two orders, timed alike."""
+"""tools/analysis_tools/benchmark_occ_head.py: the head's two orders, timed
+alike."""
 import json
 import os.path as osp
 
@@ -17,7 +18,7 @@ def test_plane_shapes_are_what_the_encoder_outputs():
     16 x 8 at level 0, halved at each level; the encoder, run on zero
     planes of the cylinder's sides, outputs exactly these."""
     from mmengine.config import Config
-    tool = load_tool('benchmark_occ_head.py')
+    tool = load_tool('tools/analysis_tools/benchmark_occ_head.py')
     model = tool.build_model(Config.fromfile(TINY), hidden=None)
     shapes = tool.plane_shapes(model)
     assert shapes[0] == [(16, 32), (32, 8), (16, 8)]
@@ -40,7 +41,7 @@ def test_both_orders_are_timed_and_agree(tmp_path):
     orders round differently, so a difference of exactly 0 would mean the
     same order ran twice."""
     out = tmp_path / 'head.json'
-    load_tool('benchmark_occ_head.py').main(
+    load_tool('tools/analysis_tools/benchmark_occ_head.py').main(
         [TINY, '--rounds', '1', '--hidden', '8', '--out', str(out)])
     rows = json.loads(out.read_text())['rows']
     assert [r['hidden'] for r in rows] == [8]

@@ -1,4 +1,5 @@
-"""tools/benchmark_occ_loss.py: the loss of a git revision, timed alike."""
+"""tools/analysis_tools/benchmark_occ_loss.py: the loss of a git revision,
+timed alike."""
 import json
 import os.path as osp
 
@@ -20,7 +21,7 @@ def test_drawn_logits_favour_the_label_of_their_scale():
     label at the finest scale, and at the coarser one the label of the
     block's first voxel (the drawing reads labels[::2, ::2, ::2]); with
     empty probability 1 every label is 0."""
-    tool = load_tool('benchmark_occ_loss.py')
+    tool = load_tool('tools/analysis_tools/benchmark_occ_loss.py')
     logits, labels = tool.draw_inputs([(4, 4, 2), (2, 2, 1)], 3, 2, 0.5,
                                       100.0, 0)
     assert labels.shape == (2, 4, 4, 2)
@@ -36,7 +37,7 @@ def test_the_reference_stays_out_of_the_registry():
     """The package at HEAD is imported as classes of its own (not the ones
     the project imported), and afterwards the registry builds the
     project's classes again."""
-    tool = load_tool('benchmark_occ_loss.py')
+    tool = load_tool('tools/analysis_tools/benchmark_occ_loss.py')
     classes = tool.load_reference('HEAD')
     assert {'OccLovaszLoss', 'MultiScaleOccupancyLoss'} <= set(classes)
     assert classes['OccLovaszLoss'] is not OccLovaszLoss
@@ -49,7 +50,7 @@ def test_the_reference_stays_out_of_the_registry():
 
 def test_an_unknown_revision_is_named():
     """A revision without the loss package fails with its name."""
-    tool = load_tool('benchmark_occ_loss.py')
+    tool = load_tool('tools/analysis_tools/benchmark_occ_loss.py')
     with pytest.raises(ValueError, match='no-such-revision'):
         tool.load_reference('no-such-revision')
 
@@ -60,7 +61,7 @@ def test_the_same_code_times_alike_and_agrees_exactly(tmp_path):
     and the same code on the same inputs gives the same 16 terms (4 losses
     x 4 scales) and gradients exactly (relative difference 0)."""
     out = tmp_path / 'loss.json'
-    load_tool('benchmark_occ_loss.py').main(
+    load_tool('tools/analysis_tools/benchmark_occ_loss.py').main(
         [TINY, '--ref', 'HEAD', '--rounds', '1', '--out', str(out)])
     result = json.loads(out.read_text())['result']
     assert result['voxels'] == 200 * 200 * 16

@@ -1,4 +1,5 @@
-"""tools/camera_visibility.py counts the pixels and grid cells per class.
+"""tools/analysis_tools/camera_visibility.py counts the pixels and grid cells
+per class.
 
 A hand-made 4 x 6 label map and a 2 x 3 grid of 2 x 2 cells::
 
@@ -35,7 +36,7 @@ LABELS = np.array([[1, 1, 2, 2, 0, 3],
 def test_cell_majority_by_hand():
     """The module docstring's cells: labels 0 (two ties), 1, 2, 4 and 5
     win one or two cells; 3 and 6 none."""
-    tool = load_tool('camera_visibility.py')
+    tool = load_tool('tools/analysis_tools/camera_visibility.py')
     won = tool.cell_majority(LABELS, (2, 3), 7)
     assert won.tolist() == [2, 1, 1, 0, 1, 1, 0]
 
@@ -44,7 +45,7 @@ def test_cell_edges_of_an_uneven_grid():
     """A 5-row image in 2 rows of cells: edges at round(2.5) = 2, so rows
     0-1 and 2-4. Column 0 is label 1 in rows 0-1 and label 2 below: the
     top cell goes to 1, the bottom one to 2."""
-    tool = load_tool('camera_visibility.py')
+    tool = load_tool('tools/analysis_tools/camera_visibility.py')
     labels = np.array([[1], [1], [2], [2], [2]])
     assert tool.cell_majority(labels, (2, 1), 3).tolist() == [0, 1, 1]
     with pytest.raises(ValueError, match='a 6 x 1 grid does not fit a 5 x '
@@ -56,7 +57,7 @@ def test_count_sums_images():
     """Two copies of the map: pixel shares as in the docstring (label 1:
     5 / 24 = 20.83 %), cells doubled; a label out of range is refused
     with the image named."""
-    tool = load_tool('camera_visibility.py')
+    tool = load_tool('tools/analysis_tools/camera_visibility.py')
     count = tool.CameraCount((2, 3), num_labels=7)
     count.update(LABELS)
     count.update(LABELS)
@@ -77,7 +78,7 @@ def test_command_line_on_the_tiny_world(converted_tiny_world, tmp_path):
     share is the share of raw class 24 (flat.driveable_surface, the only
     raw class of that occupancy class) counted straight from the maps."""
     from PIL import Image
-    tool = load_tool('camera_visibility.py')
+    tool = load_tool('tools/analysis_tools/camera_visibility.py')
     out_json = tmp_path / 'cams.json'
     out = tool.main([
         OCCCYL, '--data-root', converted_tiny_world, '--cells', '6', '10',
@@ -104,7 +105,7 @@ def test_command_line_on_the_tiny_world(converted_tiny_world, tmp_path):
 def test_a_missing_map_is_named(world_copy):
     """Without the synthetic world's camera labels (a real nuScenes root)
     the error names the missing file and says what writes it."""
-    tool = load_tool('camera_visibility.py')
+    tool = load_tool('tools/analysis_tools/camera_visibility.py')
     missing = sorted(
         glob.glob(
             osp.join(world_copy, 'synthetic_gt', 'cam_labels', 'CAM_FRONT',

@@ -1,7 +1,7 @@
 """requirements/constraints.txt pins each package once on Python 3.9-3.12.
 
-Offline halves of tools/check_constraints.py (its ``--resolve`` half asks
-the package index and is run by hand; see docs/install.md).
+Offline halves of tools/misc/check_constraints.py (its ``--resolve`` half asks
+the package index and is run by hand; see docs/get_started.md).
 """
 import importlib.metadata
 import importlib.util
@@ -17,10 +17,10 @@ REQ = osp.join(ROOT, 'requirements')
 
 
 def _tool():
-    """tools/check_constraints.py as a module."""
+    """tools/misc/check_constraints.py as a module."""
     spec = importlib.util.spec_from_file_location(
-        'check_constraints_tool', osp.join(ROOT, 'tools',
-                                           'check_constraints.py'))
+        'check_constraints_tool',
+        osp.join(ROOT, 'tools', 'misc', 'check_constraints.py'))
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module

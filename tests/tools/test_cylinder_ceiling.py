@@ -1,5 +1,5 @@
-"""tools/cylinder_ceiling.py scores the ground truth kept at the majority
-class of each cylinder cell.
+"""tools/analysis_tools/cylinder_ceiling.py scores the ground truth kept at the
+majority class of each cylinder cell.
 
 A hand-made 4 x 4 x 1 grid of 1 m voxels over ``[-2, 2]^2 x [0, 1]`` and
 a cylinder of one ring, four azimuth sectors and one layer (radius 2 m,
@@ -30,7 +30,7 @@ SECTORS = CylinderGrid.for_box(RANGE, (1, 4, 1), radius='inscribed',
 
 def test_cells_are_the_quadrants():
     """Rows i = 0, 1 have x < 0; columns j = 0, 1 have y < 0."""
-    tool = load_tool('cylinder_ceiling.py')
+    tool = load_tool('tools/analysis_tools/cylinder_ceiling.py')
     cells = tool.cell_of_voxels((4, 4, 1), RANGE, (1, 1, 1), SECTORS)
     assert cells[..., 0].tolist() == [[0, 0, 3, 3], [0, 0, 3, 3],
                                       [1, 1, 2, 2], [1, 1, 2, 2]]
@@ -42,7 +42,7 @@ def test_majority_labels():
     and the lower label wins, so the 3 becomes 0 and the 255s 0 too (the
     scoring skips them). Cell 1 holds only 255: the fill label 0. Cell 3
     holds 4, 4, 4, 0: 4."""
-    tool = load_tool('cylinder_ceiling.py')
+    tool = load_tool('tools/analysis_tools/cylinder_ceiling.py')
     occ = np.array([[255, 255, 4, 4], [3, 0, 4, 0], [255, 255, 1, 1],
                     [255, 255, 1, 2]])[..., None]
     cells = tool.cell_of_voxels((4, 4, 1), RANGE, (1, 1, 1), SECTORS)
@@ -60,7 +60,7 @@ def test_command_line_on_the_tiny_world(converted_tiny_world, tmp_path):
     takes the split-wide majority, empty, so no class is predicted: every
     occurring class scores 0, and so do IoU and mIoU. With the paper's
     480 x 368 x 32 cells most of the ground truth survives."""
-    tool = load_tool('cylinder_ceiling.py')
+    tool = load_tool('tools/analysis_tools/cylinder_ceiling.py')
     out_json = tmp_path / 'ceiling.json'
     out = tool.main([
         OCCCYL, '--shapes', '1x1x1', '480x368x32', '--data-root',
@@ -84,7 +84,7 @@ def test_command_line_on_the_tiny_world(converted_tiny_world, tmp_path):
 def test_default_is_the_configs_cylinder(converted_tiny_world):
     """Without --shapes the tiny config's own cylinder is measured."""
     from mmengine.config import Config
-    tool = load_tool('cylinder_ceiling.py')
+    tool = load_tool('tools/analysis_tools/cylinder_ceiling.py')
     cfg = Config.fromfile(OCCCYL)
     out = tool.measure(cfg, data_root=converted_tiny_world)
     assert list(out) == ['x'.join(map(str, cfg.model.cylinder.shape))]
@@ -93,7 +93,7 @@ def test_default_is_the_configs_cylinder(converted_tiny_world):
 def test_refusals():
     """A config without a cylinder, and a malformed shape."""
     from mmengine.config import Config
-    tool = load_tool('cylinder_ceiling.py')
+    tool = load_tool('tools/analysis_tools/cylinder_ceiling.py')
     with pytest.raises(ValueError, match='sdgocc-fusion_tiny.*model.cylind'):
         tool.measure(Config.fromfile(SDG))
     with pytest.raises(SystemExit):
@@ -107,7 +107,7 @@ def test_occ3d_needs_the_camera_mask(monkeypatch):
     sample without ``mask_camera`` is the metric's error naming it, not a
     silent count of nothing."""
     from mmengine.config import Config
-    tool = load_tool('cylinder_ceiling.py')
+    tool = load_tool('tools/analysis_tools/cylinder_ceiling.py')
     cfg = Config.fromfile(OCCCYL)
     cfg.test_evaluator.convention = 'occ3d'
     cfg.test_evaluator.use_camera_mask = True
@@ -123,6 +123,6 @@ def test_cfg_options_are_checked_as_in_test_py():
     """The analysis tools merge --cfg-options through apply_cfg_options:
     a string where the config has a list is refused, naming the key,
     before any data is read."""
-    tool = load_tool('cylinder_ceiling.py')
+    tool = load_tool('tools/analysis_tools/cylinder_ceiling.py')
     with pytest.raises(ValueError, match="grid_size='big'"):
         tool.main([OCCCYL, '--cfg-options', 'grid_size=big'])

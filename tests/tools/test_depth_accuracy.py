@@ -1,4 +1,5 @@
-"""tools/depth_accuracy.py measures the distribution the lift uses.
+"""tools/analysis_tools/depth_accuracy.py measures the distribution the lift
+uses.
 
 The tiny configs on the tiny world (one scene of two key frames), with an
 untrained, seeded model. An oracle installed on the DepthNet replaces its
@@ -35,7 +36,7 @@ def _checkpoint(config, path):
 
 
 def _build(config, world, tmp_path):
-    tool = load_tool('depth_accuracy.py')
+    tool = load_tool('tools/analysis_tools/depth_accuracy.py')
     args = tool.parse_args([
         config, _checkpoint(config, tmp_path / 'w.pth'), '--data-root',
         world
@@ -134,7 +135,7 @@ def test_the_key_frame_is_measured_not_the_previous_one(
 def test_command_line_writes_the_numbers(converted_tiny_world, tmp_path):
     """main() on a saved checkpoint: the printed numbers go to --json."""
     import json
-    tool = load_tool('depth_accuracy.py')
+    tool = load_tool('tools/analysis_tools/depth_accuracy.py')
     out = tmp_path / 'depth.json'
     numbers = tool.main([
         OCCCYL, _checkpoint(OCCCYL, tmp_path / 'w.pth'), '--data-root',
@@ -146,6 +147,6 @@ def test_command_line_writes_the_numbers(converted_tiny_world, tmp_path):
 
 
 def test_a_model_without_depth_net_is_refused():
-    tool = load_tool('depth_accuracy.py')
+    tool = load_tool('tools/analysis_tools/depth_accuracy.py')
     with pytest.raises(ValueError, match='has no depth_net'):
         tool.measure(nn.Linear(1, 1), [])

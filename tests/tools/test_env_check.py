@@ -1,4 +1,4 @@
-"""tools/env_check.py: what the setup keeps, installs or refuses.
+"""tools/misc/env_check.py: what the setup keeps, installs or refuses.
 
 The decisions take the installed versions as arguments, so made-up
 environments stand in for a user's CUDA machine (no GPU here); the last
@@ -12,11 +12,11 @@ import sys
 import pytest
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
-TOOL = osp.join(ROOT, 'tools', 'env_check.py')
+TOOL = osp.join(ROOT, 'tools', 'misc', 'env_check.py')
 
 
 def _tool():
-    """tools/env_check.py as a module."""
+    """tools/misc/env_check.py as a module."""
     spec = importlib.util.spec_from_file_location('env_check_tool', TOOL)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

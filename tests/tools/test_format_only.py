@@ -61,7 +61,7 @@ def test_format_only_edits_only_the_test_config(tmp_path):
     """--format-only: the metric writes to <work_dir>/submission and scores
     nothing; the test pipeline keeps LoadOccupancyGT (allowing unlabelled
     samples) and loses the lidarseg steps; the val config is unchanged."""
-    tool = load_tool('test.py')
+    tool = load_tool('tools/test.py')
     args = tool.parse_args([CONFIGS['occ3d'], 'ckpt.pth', '--format-only',
                             '--work-dir', str(tmp_path)])
     cfg = tool.build_cfg(args)

@@ -1,4 +1,5 @@
-"""tools/lidar_visibility.py counts the voxels that hold a LiDAR return.
+"""tools/analysis_tools/lidar_visibility.py counts the voxels that hold a LiDAR
+return.
 
 A hand-made 2 x 2 x 1 grid of 1 m voxels from (0, 0, 0), labels
 ``[[1, 2], [2, 0]]`` (x down, y across), and points in voxels (0, 0) and
@@ -25,7 +26,7 @@ POINTS = np.array([[0.5, 0.5, 0.5, 7.0], [1.2, 0.1, 0.9, 7.0],
 def test_voxel_hits():
     """(0.5, 0.5, 0.5) is in voxel (0, 0, 0), (1.2, 0.1, 0.9) in (1, 0,
     0); (5, 5, 0) is outside and counts nowhere."""
-    tool = load_tool('lidar_visibility.py')
+    tool = load_tool('tools/analysis_tools/lidar_visibility.py')
     hit = tool.voxel_hits(OCC, POINTS, RANGE, (1, 1, 1))
     assert hit[..., 0].tolist() == [[True, False], [True, False]]
 
@@ -34,7 +35,7 @@ def test_count_per_label():
     """Label 1: its one voxel is hit and near (0.71 < 1 m). Label 2: of
     its two voxels (1.58 m each) the one at (1, 0) is hit: 50 %, none
     near. Label 0 ("empty"): not hit, 2.12 m. Label 2 has no name."""
-    tool = load_tool('lidar_visibility.py')
+    tool = load_tool('tools/analysis_tools/lidar_visibility.py')
     count = tool.VisibilityCount(RANGE, (1, 1, 1), near=1.0)
     count.update(OCC, POINTS)
     out = count.summary(['empty', 'one'])
@@ -59,7 +60,7 @@ def test_command_line_on_the_tiny_world(converted_tiny_world, tmp_path):
     200 x 16 grids is counted once, the LiDAR hits the road, and almost no
     empty voxel holds a return (only a few, where a point lands in a cell
     the coarse label calls empty)."""
-    tool = load_tool('lidar_visibility.py')
+    tool = load_tool('tools/analysis_tools/lidar_visibility.py')
     out_json = tmp_path / 'vis.json'
     out = tool.main([
         OCCCYL, '--data-root', converted_tiny_world, '--json',
@@ -78,7 +79,7 @@ def test_labels_of_another_grid_are_refused(converted_tiny_world):
     grid) on the world's 200 x 200 x 16 labels: the error says which file
     and sample."""
     from mmengine.config import Config
-    tool = load_tool('lidar_visibility.py')
+    tool = load_tool('tools/analysis_tools/lidar_visibility.py')
     cfg = Config.fromfile(OCCCYL)
     cfg.voxel_size, cfg.grid_size = [0.4, 0.4, 0.4], [250, 250, 20]
     with pytest.raises(ValueError, match=r'nuscenes_occ_infos_val.pkl, '

@@ -7,12 +7,13 @@ trains and evaluates in seconds.
 import importlib
 import os
 import os.path as osp
+import re
 import uuid
 
 import pytest
 import torch
 
-from projects.occ_common.testing.tool_logs import load_tool
+from projects.occ_common.testing.tool_logs import load_tool, run_tool
 from projects.occ_common.utils import (CorruptFileError, UnsafeCheckpointError,
                                        load_checkpoint_file)
 
@@ -22,7 +23,7 @@ CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ.py')
 
 config_checks = importlib.import_module(
     'projects.occ_common.utils.config_checks')
-test_tool, train_tool = load_tool('test.py'), load_tool('train.py')
+test_tool, train_tool = load_tool('tools/test.py'), load_tool('tools/train.py')
 
 
 def _name():
@@ -57,6 +58,87 @@ def test_wrongly_typed_cfg_options_name_key_and_kind(item, msg):
     args = train_tool.parse_args([CONFIG, '--cfg-options', item])
     with pytest.raises(ValueError, match=msg):
         train_tool.build_cfg(args)
+
+
+#: The toy config's values: train_cfg.max_epochs = 2, batch_size = 2, one
+#: MultiStepLR in param_scheduler, model a dict of three keys (its repr is
+#: longer than config_checks.MAX_QUOTED, so only its kind is named).
+WRONG_KINDS = [
+    ('train_cfg.max_epochs=abc', "train_cfg.max_epochs='abc' (a string), "
+     'but the config has the integer 2 there'),
+    ('train_dataloader.batch_size=[1,2]', "train_dataloader.batch_size="
+     "'[1,2]' (a list), but the config has the integer 2 there"),
+    ('model=abc', "model='abc' (a string), but the config has a dict "
+     'there'),
+    ('train_cfg.max_epochs.x=1', "train_cfg.max_epochs.x='1', but the "
+     'config has the integer 2 at train_cfg.max_epochs, not a dict to set '
+     'a key in'),
+    ('param_scheduler.3.gamma=0.1', "param_scheduler.3.gamma='0.1', but "
+     "param_scheduler is a list of 1 item, which has no item '3'"),
+]
+
+
+@pytest.mark.parametrize('item, shown', WRONG_KINDS)
+def test_wrong_kind_ends_train_and_test_with_one_line(item, shown, capsys):
+    """Status 2 and one line 'PROG: error: ...' naming key, given value and
+    the kind it replaces, as argparse ends on a malformed item. Before:
+    a ValueError traceback (the first two), a TypeError / IndexError
+    traceback from mmengine's merge (the last two), or a traceback when
+    the Runner built the model from the string 'abc'."""
+    for tool in (train_tool, test_tool):
+        argv = [CONFIG] + (['x.pth'] if tool is test_tool else [])
+        with pytest.raises(SystemExit) as err:
+            tool.main(argv + ['--cfg-options', item, _name()])
+        assert err.value.code == 2
+        lines = capsys.readouterr().err.splitlines()
+        assert len(lines) == 1, lines
+        assert re.fullmatch(
+            r'\S+: error: --cfg-options of the wrong kind: ' +
+            re.escape(shown),
+            lines[0]), lines[0]
+
+
+def test_wrong_kind_from_the_command_line_is_one_line():
+    """The script itself: exit status 2, stderr exactly one line naming the
+    program, no traceback, no work dir created."""
+    proc = run_tool('tools/train.py', CONFIG, '--cfg-options',
+                    'train_cfg.max_epochs=abc', timeout=300)
+    assert proc.returncode == 2, proc.stderr[-3000:]
+    assert proc.stderr == (
+        "train.py: error: --cfg-options of the wrong kind: "
+        "train_cfg.max_epochs='abc' (a string), but the config has the "
+        'integer 2 there\n')
+
+
+@pytest.mark.parametrize('script', [
+    'tools/analysis_tools/benchmark.py',
+    'tools/analysis_tools/cylinder_ceiling.py',
+])
+def test_analysis_tools_end_a_wrong_kind_in_one_line(script):
+    """The analysis tools check and end alike: benchmark.py merges its
+    DictAction options through check_cfg_options, cylinder_ceiling.py
+    through apply_cfg_options; both exit 2 with one line of stderr."""
+    proc = run_tool(script, CONFIG, '--cfg-options',
+                    'train_cfg.max_epochs=abc', timeout=300)
+    assert proc.returncode == 2, proc.stderr[-3000:]
+    assert len(proc.stderr.splitlines()) == 1, proc.stderr[-3000:]
+    name = osp.basename(script)
+    assert proc.stderr.startswith(
+        f"{name}: error: --cfg-options of the wrong kind: "
+        "train_cfg.max_epochs='abc' (a string), but the config has the "
+        'integer 2 there'), proc.stderr
+
+
+def test_wrong_kind_stays_a_value_error_for_callers():
+    """build_cfg (and the analysis tools' load_tool_config) still raise:
+    CfgOptionsError is a ValueError; only the tools' main turns it into
+    the one-line exit."""
+    args = test_tool.parse_args([CONFIG, 'x.pth', '--cfg-options', 'model=1'])
+    with pytest.raises(config_checks.CfgOptionsError,
+                       match="model='1' \\(an integer\\), but the "
+                       'config has a dict there'):
+        test_tool.build_cfg(args)
+    assert issubclass(config_checks.CfgOptionsError, ValueError)
 
 
 def test_kind_preserving_overrides_pass():

@@ -15,12 +15,14 @@ from projects.occ_common.testing.tool_logs import (REPO_ROOT, load_tool,
                                                    run_tool)
 
 TOOLS = sorted(
-    osp.basename(p) for p in glob.glob(osp.join(REPO_ROOT, 'tools', '*.py')))
+    osp.relpath(p, REPO_ROOT)
+    for pattern in ('tools/*.py', 'tools/*/*.py', 'demo/*.py')
+    for p in glob.glob(osp.join(REPO_ROOT, pattern)))
 
 
 @pytest.mark.parametrize('script', TOOLS)
 def test_tool_loads_as_a_module_without_sys_path_edits(script):
-    """Loading ``tools/<script>`` from its file succeeds (``from cpu_dist
+    """Loading a tool script from its file succeeds (``from cpu_dist
     import ...`` needed tools/ on sys.path) and leaves sys.path alone."""
     import sys
     before = list(sys.path)
@@ -32,6 +34,7 @@ def test_tool_loads_as_a_module_without_sys_path_edits(script):
 def test_tool_runs_from_another_folder(tmp_path):
     """``python /repo/tools/train.py --help`` from an unrelated folder (one
     tool: a start-up costs ~10 s of imports)."""
-    proc = run_tool('train.py', '--help', cwd=str(tmp_path), timeout=300)
+    proc = run_tool('tools/train.py', '--help', cwd=str(tmp_path),
+                    timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert 'usage' in proc.stdout

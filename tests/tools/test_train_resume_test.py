@@ -61,14 +61,14 @@ def hand_computed_miou(checkpoint):
 def test_train_resume_and_test(tmp_path):
     """Train 2 epochs, resume to 3, evaluate the epoch-3 checkpoint."""
     work_dir = str(tmp_path / 'work')
-    proc = run_tool('train.py', CONFIG, '--work-dir', work_dir)
+    proc = run_tool('tools/train.py', CONFIG, '--work-dir', work_dir)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert osp.isfile(osp.join(work_dir, 'epoch_2.pth'))
     with open(osp.join(work_dir, 'last_checkpoint')) as f:
         assert f.read().strip().endswith('epoch_2.pth')
 
-    proc = run_tool('train.py', CONFIG, '--work-dir', work_dir, '--resume',
-                    '--cfg-options', 'train_cfg.max_epochs=3')
+    proc = run_tool('tools/train.py', CONFIG, '--work-dir', work_dir,
+                    '--resume', '--cfg-options', 'train_cfg.max_epochs=3')
     assert proc.returncode == 0, proc.stderr[-3000:]
     output = proc.stdout + proc.stderr
     assert 'resumed epoch: 2, iter: 8' in output
@@ -79,7 +79,7 @@ def test_train_resume_and_test(tmp_path):
     assert (meta['epoch'], meta['iter']) == (3, 12)
 
     test_dir = str(tmp_path / 'test')
-    proc = run_tool('test.py', CONFIG, ckpt3, '--work-dir', test_dir)
+    proc = run_tool('tools/test.py', CONFIG, ckpt3, '--work-dir', test_dir)
     assert proc.returncode == 0, proc.stderr[-3000:]
     miou = last_test_metrics(test_dir)['occ/mIoU']
     assert miou == pytest.approx(hand_computed_miou(ckpt3), abs=0.01)
@@ -90,7 +90,7 @@ def test_train_resume_and_test(tmp_path):
 
 def test_resume_from_explicit_checkpoint_path(tmp_path):
     """``--resume PATH`` sets ``resume=True`` and ``load_from=PATH``."""
-    train = load_tool('train.py')
+    train = load_tool('tools/train.py')
     args = train.parse_args([CONFIG, '--resume', 'some/ckpt.pth'])
     cfg = train.build_cfg(args)
     assert (cfg.resume, cfg.load_from) == (True, 'some/ckpt.pth')

@@ -47,7 +47,8 @@ the call, ``peak_memory_mb`` the whole process (or all CUDA tensors; with
 
 Usage::
 
-    python tools/benchmark.py CONFIG [CKPT] [--compare CONFIG2 [CKPT2]]
+    python tools/analysis_tools/benchmark.py CONFIG [CKPT] [--compare \\
+        CONFIG2 [CKPT2]]
         [--device cuda] [--runs 20] [--warmup 5] [--json OUT]
 
 Like the train and test tools this script takes the models from the
@@ -69,6 +70,8 @@ from projects.occ_common.utils.benchmarking import (PeakMemory,
                                                     alternating_runs,
                                                     count_gflop, matmul_call,
                                                     matmul_share, summarise)
+from projects.occ_common.utils.config_checks import (cfg_errors_exit,
+                                                     check_cfg_options)
 from projects.occ_common.utils.glibc_malloc import (MMAP_THRESHOLD,
                                                     TRIM_THRESHOLD,
                                                     tune_glibc_malloc)
@@ -159,7 +162,7 @@ def load_config(path: str, options: Optional[dict]) -> Config:
     from mmengine.registry import init_default_scope
     cfg = Config.fromfile(path)
     if options:
-        cfg.merge_from_dict(options)
+        cfg.merge_from_dict(check_cfg_options(cfg, options))
     init_default_scope(cfg.get('default_scope', 'mmdet3d'))
     return cfg
 
@@ -671,4 +674,5 @@ def main(argv=None) -> Dict:
 
 
 if __name__ == '__main__':
-    main()
+    with cfg_errors_exit():
+        main()

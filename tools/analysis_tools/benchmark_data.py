@@ -13,8 +13,9 @@ Measures, in one run:
 Without ``--data-root`` a small synthetic world with 1600x900 images is
 generated into a temporary folder and converted first::
 
-    python tools/benchmark_data.py                       # synthetic world
-    python tools/benchmark_data.py --data-root data/nuscenes \\
+    python tools/analysis_tools/benchmark_data.py                       # \\
+        synthetic world
+    python tools/analysis_tools/benchmark_data.py --data-root data/nuscenes \\
         --config configs/_base_/datasets/occ3d-nus.py    # real nuScenes
 """
 import argparse
@@ -26,7 +27,8 @@ import time
 import numpy as np
 import torch
 
-REPO = osp.dirname(osp.dirname(osp.abspath(__file__)))
+REPO = osp.dirname(
+    osp.dirname(osp.dirname(osp.abspath(__file__))))
 
 
 def parse_args(argv=None):

@@ -1,7 +1,8 @@
 """Do the models learn? Train configs on synthetic scenes, evaluate on
 held-out ones, and draw their learning curves.
 
-    python tools/benchmark_learning.py --runs occcyl-tiny sdg-fusion-tiny \\
+    python tools/analysis_tools/benchmark_learning.py --runs occcyl-tiny \\
+        sdg-fusion-tiny \\
         --iters 400 --val-interval 100 --out work_dirs/learning
 
 1. generates (or reuses) a synthetic nuScenes-format world whose last
@@ -45,7 +46,7 @@ from projects.occ_common.utils.tool_runs import (LARGE_CLASS_MIN_IOU,
                                                  LARGE_CLASS_VOXELS,
                                                  data_options, format_table,
                                                  large_classes, last_metrics,
-                                                 pct, prepare_world,
+                                                 load_tool, pct, prepare_world,
                                                  read_json_lines, run,
                                                  stretched_times, tool)
 
@@ -364,7 +365,7 @@ def _seconds(minutes: Optional[float]) -> Optional[float]:
 
 def train_one(spec: dict) -> None:
     """Train one run (in the child process); see :func:`bench_run`."""
-    import train as train_tool  # tools/ is on sys.path: this is a script
+    train_tool = load_tool('tools/train.py')
     from mmengine.registry import DATASETS, init_default_scope
     from mmengine.runner import Runner
     work_dir = spec['work_dir']
@@ -512,14 +513,14 @@ def bench_run(name: str, config: str, options: List[str], args,
         with open(osp.join(run_dir, SETTINGS), 'w') as f:
             json.dump(settings, f, indent=1)
         spec = dict(settings, work_dir=work_dir)
-        run(tool('benchmark_learning.py') +
+        run(tool('tools/analysis_tools/benchmark_learning.py') +
             ['--train-one', json.dumps(spec)], log_path, f'training {name}')
     clock = _load_json(osp.join(work_dir, CLOCK))
     info = _load_json(osp.join(work_dir, 'run_info.json'))
 
     test_dir = osp.join(run_dir, 'test')
-    cmd = tool('test.py') + [config, _last_checkpoint(work_dir),
-                             '--work-dir', test_dir]
+    cmd = tool('tools/test.py') + [
+        config, _last_checkpoint(work_dir), '--work-dir', test_dir]
     # The GT voxels of every class, for the table's large-class line, and
     # the confusion matrix, for where the weak classes' voxels go.
     confusion_csv = osp.join(run_dir, CONFUSION)

@@ -27,7 +27,7 @@ measurement also calls the plugin's frustum helpers to make its inputs.
 
 Example::
 
-    python tools/benchmark_lift_pool.py \
+    python tools/analysis_tools/benchmark_lift_pool.py \
         configs/occ_cyl/occcyl_r50-swins_3xb1-24e_surroundocc-nus.py \
         --table6 --model
 """

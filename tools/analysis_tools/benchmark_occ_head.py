@@ -14,7 +14,7 @@ difference between the two orders (float rounding only).
 
 Example::
 
-    OMP_NUM_THREADS=1 python tools/benchmark_occ_head.py \
+    OMP_NUM_THREADS=1 python tools/analysis_tools/benchmark_occ_head.py \
         configs/occ_cyl/occcyl_small_1xb1-12e_surroundocc-nus-synthetic.py \
         --hidden 32 128 --rounds 7
 """

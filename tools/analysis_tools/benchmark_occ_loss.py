@@ -24,7 +24,7 @@ itself, as in training.
 
 Example::
 
-    OMP_NUM_THREADS=1 python tools/benchmark_occ_loss.py \
+    OMP_NUM_THREADS=1 python tools/analysis_tools/benchmark_occ_loss.py \
         configs/occ_cyl/occcyl_small_1xb1-12e_surroundocc-nus-synthetic.py \
         --ref 8d28a04 --rounds 7
 """
@@ -49,7 +49,8 @@ from torch import nn
 from projects.occ_common.utils.benchmarking import (alternating_runs,
                                                     round_medians)
 
-ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+ROOT = osp.dirname(
+    osp.dirname(osp.dirname(osp.abspath(__file__))))
 #: The package whose revisions are compared.
 LOSSES = 'projects/occ_common/models/losses'
 

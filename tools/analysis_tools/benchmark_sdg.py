@@ -29,10 +29,12 @@ paper-size Occ3D configs (6 cameras, 256x704 images, 0.5 m depth bins,
 
 Example::
 
-    python tools/create_synthetic_nuscenes.py data/synthetic_nuscenes
+    python tools/dataset_converters/create_synthetic_nuscenes.py \\
+        data/synthetic_nuscenes
     python tools/create_data.py nuscenes \\
         --root-path data/synthetic_nuscenes --version v1.0-mini
-    python tools/benchmark_sdg.py --data-root data/synthetic_nuscenes/ \\
+    python tools/analysis_tools/benchmark_sdg.py --data-root \\
+        data/synthetic_nuscenes/ \\
         --real-sample ../shared/data/nuscenes_real_sample
 
 Like the other tools it imports no plugin code itself: the configs'
@@ -56,7 +58,8 @@ from mmengine.utils import import_modules_from_strings
 
 from projects.occ_common.utils.benchmarking import timed_runs
 
-ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+ROOT = osp.dirname(
+    osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIGS = dict(
     fusion='configs/sdg_occ/sdgocc-fusion_r50_4xb2-24e_occ3d-nus.py',
     kl='configs/sdg_occ/sdgocc-kl_r50_4xb2-24e_occ3d-nus.py',

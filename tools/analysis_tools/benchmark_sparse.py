@@ -21,8 +21,10 @@ intermittently returns wrong features (a race inside spconv; the
 
 Usage::
 
-    python tools/benchmark_sparse.py --quick   # ~20k points, seconds
-    python tools/benchmark_sparse.py           # ~300k points, minutes
+    python tools/analysis_tools/benchmark_sparse.py --quick   # ~20k \\
+        points, seconds
+    python tools/analysis_tools/benchmark_sparse.py           # ~300k \\
+        points, minutes
 
 The script imports the plugin's sparse package directly (unlike the train
 and test tools, which get plugin code from configs), since it benchmarks

@@ -12,7 +12,8 @@ the process, less sensitive to other jobs than wall time, and wall time).
 
 Example::
 
-    python tools/benchmark_temporal.py --rounds 5 --out temporal.json
+    python tools/analysis_tools/benchmark_temporal.py --rounds 5 --out \\
+        temporal.json
 
 Like the other tools it imports no plugin code itself: the config's
 ``custom_imports`` register it (and the test helpers of
@@ -31,7 +32,8 @@ from mmengine.utils import import_modules_from_strings
 
 from projects.occ_common.utils.benchmarking import timed_runs
 
-ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+ROOT = osp.dirname(
+    osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIG = 'configs/sdg_occ/sdgocc-fusion-2f_tiny_1xb1-6e_occ3d-nus-synthetic.py'
 
 

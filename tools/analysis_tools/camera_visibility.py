@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Which classes do the synthetic world's cameras show? Per class of a split.
 
-    python tools/camera_visibility.py CONFIG [--split train] \\
+    python tools/analysis_tools/camera_visibility.py CONFIG [--split train] \\
         [--data-root DIR] [--cells 12 20] [--json OUT.json]
 
 The generator of the synthetic world writes, next to every camera image, the
@@ -13,7 +13,8 @@ all pixels of the six views, and the cells of a ``--cells`` grid laid over
 every image in which the class covers the most pixels (12 x 20 is the
 feature map of the small configs: a 192 x 320 input at stride 16). Pixels
 of the sky (and lidarseg noise) count as ``sky/noise``. Beside
-``tools/lidar_visibility.py`` it tells whether a class the model misses
+``tools/analysis_tools/lidar_visibility.py`` it tells whether a class the model
+misses
 is one its sensors barely show: issue 14 used both for other flat, 0.8 %
 of the occupied voxels of its held-out scenes but 0.08 % of their pixels.
 """
@@ -28,7 +29,8 @@ from mmengine.config import Config
 from projects.occ_common.datasets.nuscenes_classes import (OCC_CLASS_NAMES,
                                                            lidarseg_to_occ16)
 from projects.occ_common.datasets.synthetic import camera_label_path
-from projects.occ_common.utils.config_checks import CfgOptionsAction
+from projects.occ_common.utils.config_checks import (CfgOptionsAction,
+                                                     cfg_errors_exit)
 from projects.occ_common.utils.split_dataset import (add_split_arguments,
                                                      build_split_dataset,
                                                      load_tool_config)
@@ -147,7 +149,7 @@ def read_label_map(path: str) -> np.ndarray:
         raise FileNotFoundError(
             f'{path}: no per-pixel class map; camera_visibility.py needs a '
             'synthetic world written with its camera labels '
-            '(tools/create_synthetic_nuscenes.py)')
+            '(tools/dataset_converters/create_synthetic_nuscenes.py)')
     with Image.open(path) as image:
         raw = np.asarray(image)
     return lidarseg_to_occ16(raw, source=path)
@@ -191,4 +193,5 @@ def main(argv=None) -> dict:
 
 
 if __name__ == '__main__':
-    main()
+    with cfg_errors_exit():
+        main()

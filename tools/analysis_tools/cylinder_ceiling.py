@@ -1,7 +1,8 @@
 #!/usr/bin/env python
 """How much of a split's ground truth can a cylinder hold? Per class.
 
-    python tools/cylinder_ceiling.py CONFIG [--shapes 64x128x16 ...] \\
+    python tools/analysis_tools/cylinder_ceiling.py CONFIG [--shapes \\
+        64x128x16 ...] \\
         [--split train] [--data-root DIR] [--json OUT.json]
 
 OccCylindrical predicts from features on a cylinder of ``(R, Theta, Z)``
@@ -29,7 +30,8 @@ import torch
 from mmengine.config import Config
 
 from projects.occ_common.evaluation import OccupancyMetric
-from projects.occ_common.utils.config_checks import CfgOptionsAction
+from projects.occ_common.utils.config_checks import (CfgOptionsAction,
+                                                     cfg_errors_exit)
 from projects.occ_common.utils.split_dataset import (add_split_arguments,
                                                      labelled_samples,
                                                      load_tool_config)
@@ -215,4 +217,5 @@ def main(argv=None) -> Dict[str, dict]:
 
 
 if __name__ == '__main__':
-    main()
+    with cfg_errors_exit():
+        main()

@@ -1,7 +1,8 @@
 #!/usr/bin/env python
 """How well a trained model's DepthNet places the LiDAR depths.
 
-    python tools/depth_accuracy.py CONFIG CHECKPOINT [--split train] \\
+    python tools/analysis_tools/depth_accuracy.py CONFIG CHECKPOINT \\
+        [--split train] \\
         [--data-root DIR] [--max-samples N] [--json OUT.json]
 
 Runs the model's ``predict`` on the samples of a split through the config's
@@ -22,6 +23,7 @@ from typing import Dict, Optional
 import torch
 from mmengine.config import DictAction
 
+from projects.occ_common.utils.config_checks import cfg_errors_exit
 from projects.occ_common.utils.split_dataset import (add_split_arguments,
                                                      build_split_dataset)
 
@@ -132,4 +134,5 @@ def main(argv=None) -> Dict[str, float]:
 
 
 if __name__ == '__main__':
-    main()
+    with cfg_errors_exit():
+        main()

@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Which ground-truth voxels does the LiDAR see? Per class of a split.
 
-    python tools/lidar_visibility.py CONFIG [--split train] \\
+    python tools/analysis_tools/lidar_visibility.py CONFIG [--split train] \\
         [--data-root DIR] [--json OUT.json]
 
 Runs the samples of a split through the config's test pipeline and counts,
@@ -23,7 +23,8 @@ import numpy as np
 from mmengine.config import Config
 
 from projects.occ_common.transforms.point_labels import point_voxel_index
-from projects.occ_common.utils.config_checks import CfgOptionsAction
+from projects.occ_common.utils.config_checks import (CfgOptionsAction,
+                                                     cfg_errors_exit)
 from projects.occ_common.utils.split_dataset import (add_split_arguments,
                                                      labelled_samples,
                                                      load_tool_config)
@@ -148,4 +149,5 @@ def main(argv=None) -> Dict[str, dict]:
 
 
 if __name__ == '__main__':
-    main()
+    with cfg_errors_exit():
+        main()

@@ -1,7 +1,8 @@
 """Write a small synthetic nuScenes-format world (with lidarseg, SurroundOcc
 and Occ3D occupancy labels) for demos and tests.
 
-    python tools/create_synthetic_nuscenes.py data/nuscenes_synthetic \\
+    python tools/dataset_converters/create_synthetic_nuscenes.py \\
+        data/nuscenes_synthetic \\
         --scenes 2 --samples 4 --sweeps 10 --image-size 480 270 --seed 0
 
 See ``projects/occ_common/datasets/synthetic/generate.py`` for the layout.

@@ -12,13 +12,13 @@ installing anything (``pythonX -m pip install --dry-run
 
 1. that every pin for that Python exists as a wheel for it (``--no-deps``);
 2. that build, runtime and test requirements plus torch resolve together
-   under the constraints, as ``tools/setup_env.sh`` installs them;
+   under the constraints, as ``tools/misc/setup_env.sh`` installs them;
 3. that the ``--no-deps`` OpenMMLab packages install on it.
 
 This needs the package index (the network), so it is a check script, not
 a test::
 
-    .venv/bin/python tools/check_constraints.py --resolve [--python 3.9]
+    .venv/bin/python tools/misc/check_constraints.py --resolve [--python 3.9]
 """
 import argparse
 import glob
@@ -32,7 +32,8 @@ import tempfile
 from packaging.markers import Marker
 from packaging.utils import canonicalize_name
 
-ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
+ROOT = osp.dirname(
+    osp.dirname(osp.dirname(osp.abspath(__file__))))
 REQ = osp.join(ROOT, 'requirements')
 PYTHONS = ('3.9', '3.10', '3.11', '3.12')
 PIN = re.compile(r'^(?P<name>[A-Za-z0-9][A-Za-z0-9._-]*)==(?P<version>\S+?)'

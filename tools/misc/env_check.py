@@ -1,16 +1,18 @@
-"""The supported stack, and what ``tools/setup_env.sh`` keeps or installs.
+"""The supported stack, and what ``tools/misc/setup_env.sh`` keeps or
+installs.
 
 Every range the setup enforces lives here, once, next to the reason for
-it; the README's "Supported versions" table states the same ranges. The
-setup script runs one subcommand per decision under the environment's own
+it; docs/get_started.md's "Supported versions" table states the same
+ranges. The setup script runs one subcommand per decision under the
+environment's own
 interpreter, which prints one word (``keep`` / ``install`` / ``build``)
 on stdout and explains itself on stderr; an unsupported environment exits
 with status 2 and a message that says what to change::
 
-    python tools/env_check.py python    # the interpreter itself
-    python tools/env_check.py torch     # keep | install
-    python tools/env_check.py mmcv      # keep | build
-    python tools/env_check.py spconv    # keep | install
+    python tools/misc/env_check.py python    # the interpreter itself
+    python tools/misc/env_check.py torch     # keep | install
+    python tools/misc/env_check.py mmcv      # keep | build
+    python tools/misc/env_check.py spconv    # keep | install
 
 The decisions are pure functions of what is installed, so tests feed them
 made-up environments (a CUDA torch, two spconv distributions, ...).

@@ -1,13 +1,13 @@
 #!/usr/bin/env bash
 # Creates (or updates) the pinned environment of this project, idempotently.
 #
-#   bash tools/setup_env.sh                    # .venv in the repository root
-#   PYTHON=python3.10 bash tools/setup_env.sh  # another interpreter for it
-#   VENV=/path/to/env bash tools/setup_env.sh  # an existing environment
+#   bash tools/misc/setup_env.sh                    # .venv in the repository root
+#   PYTHON=python3.10 bash tools/misc/setup_env.sh  # another interpreter for it
+#   VENV=/path/to/env bash tools/misc/setup_env.sh  # an existing environment
 #
 # Supported: CPython 3.9-3.12, torch >= 2.0, mmcv in [2.0.0rc4, 2.2.0) with
 # its compiled ops, spconv 2.3 (the CPU `spconv` or a CUDA `spconv-cuXXX`).
-# The ranges and their reasons live in tools/env_check.py, which decides each
+# The ranges and their reasons live in tools/misc/env_check.py, which decides each
 # step below and stops the setup with a message saying what to change when
 # the environment is outside them.
 #
@@ -26,7 +26,7 @@
 # torch version, so fresh clones on the same machine reuse it.
 set -euo pipefail
 
-root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
 cd "$root"
 venv="${VENV:-.venv}"
 python_bin="${PYTHON:-python3}"
@@ -35,7 +35,7 @@ req="requirements"
 mmcv_version="2.1.0"
 
 stamp_of() {
-    cat "$req"/*.txt tools/setup_env.sh tools/env_check.py setup.cfg setup.py \
+    cat "$req"/*.txt tools/misc/setup_env.sh tools/misc/env_check.py setup.cfg setup.py \
         | sha256sum | cut -d' ' -f1
 }
 
@@ -47,10 +47,10 @@ if [[ -f "$stamp_file" && "$(cat "$stamp_file")" == "$want" ]]; then
 fi
 
 log() { echo "[setup] $*"; }
-# One decision of tools/env_check.py: the word on stdout, notes on stderr;
+# One decision of tools/misc/env_check.py: the word on stdout, notes on stderr;
 # an unsupported environment stops the setup (exit status 2; called as
 # step="$(decide ...)" so that set -e sees the status).
-decide() { "$1" tools/env_check.py "$2" || exit 2; }
+decide() { "$1" tools/misc/env_check.py "$2" || exit 2; }
 
 if [[ -x "$venv/bin/python" ]]; then
     decide "$venv/bin/python" python >/dev/null

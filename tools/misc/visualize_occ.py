@@ -19,10 +19,10 @@ Two sources:
 
 Examples::
 
-    python tools/visualize_occ.py --config CFG --checkpoint CKPT \\
+    python tools/misc/visualize_occ.py --config CFG --checkpoint CKPT \\
         --index 0 --out sample0.png
-    python tools/visualize_occ.py --pred sample0.npz --out sample0.png
-    python tools/visualize_occ.py --gt data/gts/scene/token/labels.npz \\
+    python tools/misc/visualize_occ.py --pred sample0.npz --out sample0.png
+    python tools/misc/visualize_occ.py --gt data/gts/scene/token/labels.npz \\
         --convention occ3d --out gt.png
 
 Unlike the train and test tools this script imports the plugin's renderer
@@ -34,8 +34,10 @@ from typing import Dict, Optional, Sequence
 
 import numpy as np
 import torch
-from mmengine.config import DictAction
 
+from projects.occ_common.utils.config_checks import (CfgOptionsAction,
+                                                     cfg_errors_exit,
+                                                     check_cfg_options)
 from projects.occ_common.visualization import (convention_classes,
                                                render_data_sample,
                                                sample_field, save_png)
@@ -60,8 +62,8 @@ def parse_args(argv=None):
     model.add_argument(
         '--cfg-options',
         nargs='+',
-        action=DictAction,
-        help='config overrides key=value (as tools/test.py)')
+        action=CfgOptionsAction,
+        help='config overrides key=value (checked as in tools/test.py)')
     saved = parser.add_argument_group('from saved grids')
     saved.add_argument('--pred', help='.npz / .npy predicted grid')
     saved.add_argument('--gt', help='.npz / .npy ground-truth grid')
@@ -211,13 +213,19 @@ def predict_sample(args):
         tuple: The output data sample, the packed inputs of the sample,
         and the label settings of the config's metric.
     """
+    from mmengine.config import Config
     from mmengine.dataset import pseudo_collate
     from mmengine.registry import DATASETS
 
     from projects.occ_common.utils import build_trained_model
 
-    cfg, model = build_trained_model(args.config, args.checkpoint,
-                                     args.cfg_options, args.device)
+    options = args.cfg_options
+    if options:
+        options = check_cfg_options(
+            Config.fromfile(args.config), options,
+            getattr(args, 'cfg_options_raw', None))
+    cfg, model = build_trained_model(args.config, args.checkpoint, options,
+                                     args.device)
     dataset = DATASETS.build(cfg.test_dataloader.dataset)
     if not 0 <= args.index < len(dataset):
         raise ValueError(f'--index {args.index} is outside the test set of '
@@ -234,7 +242,8 @@ def main(argv=None) -> Optional[str]:
     labels: Dict = {}
     img = None
     if args.config is not None:
-        sample, inputs, labels = predict_sample(args)
+        with cfg_errors_exit():
+            sample, inputs, labels = predict_sample(args)
         if args.cameras:
             if not isinstance(inputs, dict) or inputs.get('img') is None:
                 raise ValueError(f'--cameras: the test samples of '

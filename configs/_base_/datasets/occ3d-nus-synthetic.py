@@ -1,5 +1,6 @@
 # occ3d-nus.py on the synthetic nuScenes-format world. Build it with
-#   python tools/create_synthetic_nuscenes.py data/nuscenes_synthetic
+#   python tools/dataset_converters/create_synthetic_nuscenes.py \
+#       data/nuscenes_synthetic
 #   python tools/create_data.py nuscenes --root-path data/nuscenes_synthetic \
 #       --version v1.0-mini
 # (the converter recognises the world and splits its last scenes off as val).

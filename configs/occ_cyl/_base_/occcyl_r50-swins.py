@@ -41,26 +41,27 @@ model = dict(
     # bins). DepthNet, the position embedding (4 * D channels), the
     # frustum and the depth loss all take them from here.
     depth_bound=[1.0, 51.0, 1.0],
-    # The paper takes its cylinder from its ref. [18], PointOcc: 480 x 360 x
-    # 32 cells over r in [0, 50] m, theta in [-pi, pi], z in [-5, 3] m, points
-    # outside clamped into the border voxels. The radius is the occupancy
-    # box's inscribed one (50 m for SurroundOcc's +-50 m, 40 m for Occ3D),
-    # the height the box's. Lifted with the real calibration of a nuScenes
-    # frame this reproduces Table VI's pooled pseudo-point counts within 5 %
-    # (tools/benchmark_lift_pool.py --table6). Departure: 368 azimuth cells
-    # instead of 360, so that every Swin level (strides 2 to 16) covers the
-    # azimuth exactly (360 / 16 is not whole); the counts stay within 5 %.
+    # The paper takes its cylinder from its ref. [18], PointOcc: 480 x 360 x 32
+    # cells over r in [0, 50] m, theta in [-pi, pi], z in [-5, 3] m, points
+    # outside clamped into the border voxels. The radius is the occupancy box's
+    # inscribed one (50 m for SurroundOcc's +-50 m, 40 m for Occ3D), the height
+    # the box's. Lifted with the real calibration of a nuScenes frame this
+    # reproduces Table VI's pooled pseudo-point counts within 5 %
+    # (tools/analysis_tools/benchmark_lift_pool.py --table6). Departure: 368
+    # azimuth cells instead of 360, so that every Swin level (strides 2 to 16)
+    # covers the azimuth exactly (360 / 16 is not whole); the counts stay
+    # within 5 %.
     cylinder=dict(shape=[480, 368, 32], radius='inscribed', clamp=True),
-    # Pretrained weights (README, "Pretrained weights"). The paper starts
-    # the ResNet-50 from FCOS3D; FCOS3D's released weights are a caffe-style
-    # ResNet-101-DCN that does not fit (refused, with the keys named), so
-    # the nearest public start is torchvision's ImageNet ResNet-50, with
-    # stage 1 and the BN statistics frozen as in FCOS3D / mmdet fine-tuning.
-    # checkpoint=None trains from scratch (then frozen_stages=-1,
-    # norm_eval=False). The paper does not pretrain the Swin: its entry
-    # states what loads from ImageNet Swin-S weights if given
-    # (swin_small_patch4_window7_224.pth): everything but the 128-channel,
-    # 2 x 2 patch embedding, whose absence is reported.
+    # Pretrained weights (docs/train_test.md, "Pretrained weights"). The paper
+    # starts the ResNet-50 from FCOS3D; FCOS3D's released weights are a
+    # caffe-style ResNet-101-DCN that does not fit (refused, with the keys
+    # named), so the nearest public start is torchvision's ImageNet ResNet-50,
+    # with stage 1 and the BN statistics frozen as in FCOS3D / mmdet
+    # fine-tuning. checkpoint=None trains from scratch (then frozen_stages=-1,
+    # norm_eval=False). The paper does not pretrain the Swin: its entry states
+    # what loads from ImageNet Swin-S weights if given
+    # (swin_small_patch4_window7_224.pth): everything but the 128-channel, 2 x
+    # 2 patch embedding, whose absence is reported.
     pretrained=dict(
         img_backbone=dict(
             module='img_encoder.backbone',

@@ -50,12 +50,13 @@ model = dict(
         # Recomputation here, in the DepthNet and in the LiDAR encoder
         # (not in the paper, exact): one 6x256x704 training iteration
         # with 10 sweeps peaks at 3.8 GB instead of 6.0 GB, for ~10 %
-        # more CPU time (tools/benchmark.py --train --synthetic-batch).
+        # more CPU time (tools/analysis_tools/benchmark.py --train
+        # --synthetic-batch).
         with_cp=True,
         init_cfg=None),  # weights: `pretrained` below
-    # ImageNet weights, as BEVDet-Occ, loaded and checked without
-    # torchvision (README, "Pretrained weights"); checkpoint=None trains
-    # from scratch.
+    # ImageNet weights, as BEVDet-Occ, loaded and checked without torchvision
+    # (docs/train_test.md, "Pretrained weights"); checkpoint=None trains from
+    # scratch.
     pretrained=dict(
         img_backbone=dict(
             module='img_backbone',

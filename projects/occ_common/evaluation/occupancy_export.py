@@ -15,7 +15,7 @@ converted into the other):
   SurroundOcc's own label files, the (N, 4) rows ``x, y, z, label`` of the
   occupied voxels (uint8 while indices fit: 200 x 200 x 16), so every reader
   of
-  those labels (``LoadOccupancyGT``, ``tools/visualize_occ.py``) reads a
+  those labels (``LoadOccupancyGT``, ``tools/misc/visualize_occ.py``) reads a
   prediction as it reads a label.
 
 On the synthetic world an Occ3D file is ~10 kB and a SurroundOcc file

@@ -1,13 +1,14 @@
 """Read what tools/test.py logged, for end-to-end tests of the tools."""
 import glob
-import importlib.util
 import json
 import math
 import os.path as osp
 import subprocess
 import sys
-from types import ModuleType
 from typing import Dict, List, Sequence, Tuple
+
+# load_tool is re-exported: the tests load tool scripts through this module.
+from projects.occ_common.utils.tool_runs import load_tool
 
 REPO_ROOT = osp.dirname(
     osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__)))))
@@ -63,31 +64,14 @@ def train_losses(work_dir: str) -> List[float]:
     return [r['loss'] for r in records if 'loss' in r]
 
 
-def load_tool(script: str) -> ModuleType:
-    """``tools/<script>`` imported as a module (its ``main`` not run).
-
-    Args:
-        script (str): File name in ``tools/``, e.g. ``'benchmark.py'``.
-
-    Returns:
-        ModuleType: The module, named ``tools_<stem>``.
-    """
-    name = 'tools_' + osp.splitext(script)[0]
-    spec = importlib.util.spec_from_file_location(
-        name, osp.join(REPO_ROOT, 'tools', script))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def run_tool(script: str,
              *args: str,
              timeout: float = 900,
              cwd: str = REPO_ROOT) -> subprocess.CompletedProcess:
-    """Run ``tools/<script>`` with this interpreter, from the repo root by
-    default."""
+    """Run a tool script (a path relative to the repository root) with this
+    interpreter, from the repo root by default."""
     return subprocess.run([sys.executable,
-                           osp.join(REPO_ROOT, 'tools', script), *args],
+                           osp.join(REPO_ROOT, script), *args],
                           cwd=cwd,
                           capture_output=True,
                           text=True,
@@ -100,18 +84,14 @@ def run_create_data(*argv: str):
     Returns:
         dict[str, str]: Split name -> written info file.
     """
-    spec = importlib.util.spec_from_file_location(
-        'create_data', osp.join(REPO_ROOT, 'tools', 'create_data.py'))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.main(['nuscenes', *argv])
+    return load_tool('tools/create_data.py').main(['nuscenes', *argv])
 
 
 def make_converted_world(root: str, scenes: int, samples: int, sweeps: int,
                          image_size: Tuple[int, int]) -> str:
     """Generate a synthetic world with the CLI and convert it.
 
-    Goes through ``tools/create_synthetic_nuscenes.py`` and
+    Goes through ``tools/dataset_converters/create_synthetic_nuscenes.py`` and
     ``tools/create_data.py`` exactly as a user would.
 
     Args:
@@ -124,13 +104,13 @@ def make_converted_world(root: str, scenes: int, samples: int, sweeps: int,
     Returns:
         str: ``root`` with a trailing slash, as configs expect a data_root.
     """
-    proc = run_tool('create_synthetic_nuscenes.py', root, '--scenes',
-                    str(scenes), '--samples', str(samples), '--sweeps',
-                    str(sweeps), '--image-size', str(image_size[0]),
-                    str(image_size[1]))
+    proc = run_tool('tools/dataset_converters/create_synthetic_nuscenes.py',
+                    root, '--scenes', str(scenes), '--samples', str(samples),
+                    '--sweeps', str(sweeps), '--image-size',
+                    str(image_size[0]), str(image_size[1]))
     if proc.returncode != 0:
         raise RuntimeError(f'world generation failed: {proc.stderr[-3000:]}')
-    proc = run_tool('create_data.py', 'nuscenes', '--root-path', root,
+    proc = run_tool('tools/create_data.py', 'nuscenes', '--root-path', root,
                     '--version', 'v1.0-mini')
     if proc.returncode != 0:
         raise RuntimeError(f'conversion failed: {proc.stderr[-3000:]}')

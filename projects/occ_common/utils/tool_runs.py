@@ -1,4 +1,5 @@
-"""Steps shared by ``tools/demo.py`` and ``tools/benchmark_learning.py``.
+"""Steps shared by ``demo/synthetic_demo.py`` and
+``tools/analysis_tools/benchmark_learning.py``.
 
 They live here, not in ``tools/``, because the tools import their helpers
 as installed packages (never from ``tools/`` on ``sys.path``).
@@ -9,10 +10,12 @@ metrics mmengine logged, and print a results table. Like the tools, this
 module imports no plugin code.
 """
 import glob
+import importlib.util
 import json
 import os.path as osp
 import subprocess
 import sys
+from types import ModuleType
 from typing import Dict, List, Optional, Sequence
 
 #: The repository root (projects/occ_common/utils/ -> three levels up).
@@ -60,9 +63,36 @@ def stretched_times(scheduler: dict, factor: float) -> dict:
     return out
 
 
+def load_tool(script: str) -> ModuleType:
+    """A tool script imported as a module (its ``main`` not run).
+
+    The tools are scripts in several folders, not a package; one that
+    reuses another's functions (``benchmark_learning.py`` trains through
+    ``tools/train.py``'s) loads it by path.
+
+    Args:
+        script (str): Path relative to the repository root, e.g.
+            ``'tools/train.py'``.
+
+    Returns:
+        ModuleType: The module, named ``tool_<stem>``.
+    """
+    name = 'tool_' + osp.splitext(osp.basename(script))[0]
+    spec = importlib.util.spec_from_file_location(name,
+                                                  osp.join(ROOT, script))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 def tool(name: str) -> List[str]:
-    """The command prefix of ``tools/<name>`` with this interpreter."""
-    return [sys.executable, osp.join(ROOT, 'tools', name)]
+    """The command prefix of a tool script with this interpreter.
+
+    Args:
+        name (str): Path relative to the repository root, e.g.
+            ``'tools/train.py'``.
+    """
+    return [sys.executable, osp.join(ROOT, name)]
 
 
 def run(cmd: List[str], log_path: str, what: str = 'step') -> None:
@@ -137,7 +167,7 @@ def prepare_world(data_root: str,
                 f'{differ}, complete: {meta.get("complete")}); remove it or '
                 'choose another --data-root.')
     else:
-        cmd = tool('create_synthetic_nuscenes.py') + [
+        cmd = tool('tools/dataset_converters/create_synthetic_nuscenes.py') + [
             data_root, '--scenes', str(scenes), '--samples', str(samples),
             '--seed', str(seed)]
         if image_size is not None:
@@ -145,7 +175,7 @@ def prepare_world(data_root: str,
         run(cmd, log_path, 'world generation')
     if not osp.isfile(
             osp.join(data_root, f'{INFO_PREFIX}_infos_val.pkl')):
-        cmd = tool('create_data.py') + [
+        cmd = tool('tools/create_data.py') + [
             'nuscenes', '--root-path', data_root, '--version', 'v1.0-mini']
         if val_scenes is not None:
             if not 0 < val_scenes < scenes:

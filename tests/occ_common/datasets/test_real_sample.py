@@ -169,7 +169,8 @@ def test_nearest_bin_lifts_real_lidar_depths_without_bias(real_info):
 
 
 def test_depth_bin_accuracy_of_an_oracle_on_the_real_depths(real_info):
-    """tools/depth_accuracy.py's measure on the real sample's depth maps
+    """tools/analysis_tools/depth_accuracy.py's measure on the real sample's
+    depth maps
     (the paper's 1 m bins, stride 16), with the one-hot of the nearest
     bins as the prediction: all 3,856 pixels with a return right (the
     3,860 of the test above less the 4 whose nearest return lies between

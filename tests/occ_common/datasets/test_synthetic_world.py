@@ -677,8 +677,9 @@ def test_command_line(tmp_path, capsys):
     """The CLI writes the world, shows the progress of its sweeps on
     stderr (1 scene: 10 sweeps before the first key frame, then 1: 11)
     and prints its summary as JSON on stdout."""
-    tool = runpy.run_path(osp.join(ROOT, 'tools',
-                                   'create_synthetic_nuscenes.py'))
+    tool = runpy.run_path(
+        osp.join(ROOT, 'tools', 'dataset_converters',
+                 'create_synthetic_nuscenes.py'))
     out = str(tmp_path / 'cli')
     tool['main']([out, '--scenes', '1', '--samples', '1', '--sweeps', '2',
                   '--image-size', '32', '18', '--azimuth-bins', '16',

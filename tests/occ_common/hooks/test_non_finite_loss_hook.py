@@ -127,7 +127,7 @@ def test_non_finite_weights_are_refused_before_saving():
 
 def _train(work_dir, *options):
     """tools/train.py on the toy config without validation."""
-    return run_tool('train.py', CONFIG, '--work-dir', work_dir,
+    return run_tool('tools/train.py', CONFIG, '--work-dir', work_dir,
                     '--cfg-options', 'train_cfg.val_interval=100', *options,
                     timeout=300)
 

@@ -2,7 +2,8 @@
 
 Plain numpy / OpenCV / json: importing it registers nothing. The entry
 point is :func:`generate_synthetic_nuscenes`; the command line is
-``tools/create_synthetic_nuscenes.py``. Each module holds one concept:
+``tools/dataset_converters/create_synthetic_nuscenes.py``. Each module
+holds one concept:
 
 * :mod:`.world` / :mod:`.layout`: a scene's 3D world and how it is laid out;
 * :mod:`.raycast`: ray casting shared by the cameras and the LiDAR;
