@@ -12,11 +12,11 @@ paper fix) regenerates the fixture in the same commit::
 
 (run it with the repository on ``PYTHONPATH``; without ``--write`` it
 lists the configs that differ). The per-project config tests check the
-coupled values; this one also checks that the README's configs exist.
+coupled values; tests/test_docs_paths.py checks that the configs README.md
+and docs/ name exist.
 """
 import json
 import os.path as osp
-import re
 
 import pytest
 from mmengine.config import Config
@@ -61,15 +61,6 @@ def test_config_builds_its_fingerprinted_model(path, fingerprints):
     assert 'projects.occ_common' in cfg.custom_imports['imports']
     metric = METRICS.build(cfg.val_evaluator)
     assert metric.default_prefix == 'occ'
-
-
-def test_readme_names_only_existing_configs():
-    """Each ``configs/...py`` path in the README exists."""
-    with open(osp.join(ROOT, 'README.md')) as f:
-        readme = f.read()
-    paths = set(re.findall(r'configs/[\w/.-]+\.py', readme))
-    missing = [p for p in paths if not osp.isfile(osp.join(ROOT, p))]
-    assert missing == []
 
 
 @pytest.mark.parametrize('path', CONFIGS, ids=osp.basename)

@@ -38,7 +38,7 @@ custom_hooks = [
 # Where the Runner's pictures and scalars go; mmdet3d's
 # tools/misc/browse_dataset.py draws samples through this visualizer too.
 # TensorBoard (needs `pip install tensorboard`): add
-# dict(type='TensorboardVisBackend') to vis_backends (README, "Training").
+# dict(type='TensorboardVisBackend') to vis_backends (docs/visualization.md).
 vis_backends = [dict(type='LocalVisBackend')]
 # No `name`: the Runner names each run's visualizer after the run.
 visualizer = dict(type='OccLocalVisualizer', vis_backends=vis_backends)

@@ -1,17 +1,17 @@
-# The small OccCylindrical with a 2-D semantic target for its image branch:
-# NOT in the paper. The paper's image backbone is a ResNet-50 with
-# FCOS3D's pretrained weights (Sec. IV-A); the small configs train theirs
-# from scratch on a few hundred synthetic images, where it learns little
-# semantics (issue 14: mean images instead of the real ones cost the
-# trained small model, then with a BN image branch, 1.3 mIoU). This
-# variant gives the DepthNet SDG-OCC's semantic head and target (the
-# LiDAR's lidarseg labels projected into the images, the nearest labelled
-# return of each feature cell) as a stand-in for that pretraining; the
-# learning benchmark runs it as `occcyl-small-seg2d` (README, "Do the
-# models learn?"). With the small config's GroupNorm image branch (issue
-# 14, stop 40; 60 CPU-minutes) it scored 73.12 / 36.76 and 73.33 / 36.64
-# IoU / mIoU (seeds 0, 1) against 73.55 / 37.01 and 73.74 / 36.27 without
-# the target; blanking the images then cost 3.7 and 4.6 mIoU against 2.1.
+# The small OccCylindrical with a 2-D semantic target for its image branch: NOT
+# in the paper. The paper's image backbone is a ResNet-50 with FCOS3D's
+# pretrained weights (Sec. IV-A); the small configs train theirs from scratch
+# on a few hundred synthetic images, where it learns little semantics (issue
+# 14: mean images instead of the real ones cost the trained small model, then
+# with a BN image branch, 1.3 mIoU). This variant gives the DepthNet SDG-OCC's
+# semantic head and target (the LiDAR's lidarseg labels projected into the
+# images, the nearest labelled return of each feature cell) as a stand-in for
+# that pretraining; the learning benchmark runs it as `occcyl-small-seg2d`
+# (docs/reports/learning_benchmark.md). With the small config's GroupNorm image
+# branch (issue 14, stop 40; 60 CPU-minutes) it scored 73.12 / 36.76 and 73.33
+# / 36.64 IoU / mIoU (seeds 0, 1) against 73.55 / 37.01 and 73.74 / 36.27
+# without the target; blanking the images then cost 3.7 and 4.6 mIoU against
+# 2.1.
 _base_ = ['./occcyl_small_1xb1-12e_surroundocc-nus-synthetic.py']
 
 model = dict(

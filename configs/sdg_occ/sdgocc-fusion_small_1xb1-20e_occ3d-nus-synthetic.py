@@ -1,11 +1,12 @@
 # A small SDG-Fusion for the held-out learning benchmark
-# (tools/benchmark_learning.py): the tiny model with the key frame and 9
+# (tools/analysis_tools/benchmark_learning.py): the tiny model with the key
+# frame and 9
 # LiDAR sweeps, trained with a warm-up and a cosine decay, sized so that 2
 # CPU cores train it in about 40 minutes (20 epochs of the benchmark
 # world's 64 training samples). The learning benchmark's hour stretches
 # this schedule to 1760 iterations (`--iters 1760`): on these 1280 the
 # mIoU depends on the seed (42.6 / 35.9), on 1760 every seed measured
-# passes 40 (README, "Do the models learn?").
+# passes 40 (docs/reports/learning_benchmark.md).
 #
 # Widths stay the tiny ones: at twice them (1.66 M parameters, 2.1 s an
 # iteration) the same 21 CPU-minutes scored 75.7 / 28.7 (IoU / mIoU on the

@@ -4,7 +4,7 @@
 # format, its grid and classes, and assemble the pipelines from the pieces
 # below (a base's values are fixed when it is read, so the pieces that
 # depend on the grid are built there, not here).
-# Prepare the data with (see projects/occ_common/datasets/README.md):
+# Prepare the data with (see docs/dataset_prepare.md):
 #   python tools/create_data.py nuscenes --root-path data/nuscenes \
 #       --version v1.0-trainval
 custom_imports = dict(

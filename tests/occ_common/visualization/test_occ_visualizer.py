@@ -97,13 +97,13 @@ def test_mmdet3d_browse_dataset_script_runs(converted_tiny_world, tmp_path):
     assert width > 480 and height > 2 * 360
 
 
-def test_tensorboard_override_of_the_readme_builds(tmp_path):
-    """The README's one-line TensorBoard override gives a valid config
-    whose visualizer has both backends. Without the tensorboard package
-    (not a dependency) the first logged value fails with mmengine's
-    install hint; with it, an event file is written."""
+def test_tensorboard_override_of_the_docs_builds(tmp_path):
+    """docs/visualization.md's one-line TensorBoard override gives a valid
+    config whose visualizer has both backends. Without the tensorboard package
+    (not a dependency) the first logged value fails with mmengine's install
+    hint; with it, an event file is written."""
     from mmdet3d.registry import VISUALIZERS
-    with open(osp.join(ROOT, 'README.md')) as f:
+    with open(osp.join(ROOT, 'docs', 'visualization.md')) as f:
         readme = f.read()
     line = next(ln for ln in readme.splitlines()
                 if 'TensorboardVisBackend' in ln and 'visualizer' in ln)

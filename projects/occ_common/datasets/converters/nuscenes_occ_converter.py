@@ -3,9 +3,9 @@
 Walks every sample of a nuScenes database with nuscenes-devkit and writes
 ``<prefix>_infos_{train,val,val_rainy,val_night}.pkl`` (``v1.0-test``:
 ``<prefix>_infos_test.pkl``), each ``dict(metainfo, data_list)``. The keys of
-a sample are listed in :mod:`..info_format` and in the README of this
-package. All matrices are 4x4 (``cam2img`` 3x3) nested lists, row-major,
-mapping column vectors: ``p_cam = lidar2cam @ p_lidar``.
+a sample are listed in :mod:`..info_format` and in the repository's
+docs/dataset_prepare.md. All matrices are 4x4 (``cam2img`` 3x3) nested
+lists, row-major, mapping column vectors: ``p_cam = lidar2cam @ p_lidar``.
 
 Splits:
     * ``v1.0-trainval``: ``train`` / ``val`` of ``nuscenes.utils.splits``.
@@ -49,7 +49,7 @@ from .label_files import (exists_or_report, label_roots, occ_label_paths,
 from .report import ConversionReport
 
 #: File that marks a root written by the synthetic world generator
-#: (``tools/create_synthetic_nuscenes.py``).
+#: (``tools/dataset_converters/create_synthetic_nuscenes.py``).
 SYNTHETIC_MARKER = osp.join('synthetic_gt', 'meta.json')
 
 
