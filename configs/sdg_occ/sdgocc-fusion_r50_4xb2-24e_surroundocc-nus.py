@@ -18,8 +18,9 @@ model = dict(
     # Depth bins (not given by the paper): BEVDet's nuScenes 1..60 m at
     # 0.5 m (118 bins), which covers the 50 m grid along every camera axis.
     depth_bound=[1.0, 60.0, 0.5],
-    # 0.125 m voxels (SDG-OCC's 0.1 m does not divide the 0.5 m cell): two
-    # stride-2 stages reach the 0.5 m BEV cell.
+    # 0.125 m voxels instead of the Occ3D config's 0.1 m: two stride-2
+    # stages take 0.125 m to the 0.5 m BEV cell, where 0.1 m would reach
+    # 0.4 m.
     lidar_encoder=dict(voxel_size=[0.125, 0.125, 0.125]),
     # No camera mask here, so most voxels are empty: SurroundOcc's recipe of
     # cross-entropy plus the geometric and semantic scene-class affinity

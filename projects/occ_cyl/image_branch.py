@@ -23,9 +23,10 @@ class MultiViewImageEncoder(BaseModule):
     concatenated and a 3x3 conv mixes them, so coarse context and fine
     detail both reach ``V``.
 
-    The backbone may load FCOS3D-pretrained weights through its
-    ``init_cfg`` (``dict(type='Pretrained', checkpoint=..., prefix=...)``);
-    the tests run from random initialisation.
+    Pretrained weights reach the backbone through the detector's
+    ``pretrained`` entry (:mod:`projects.occ_common.models.pretrained`,
+    which checks them key by key), not through ``init_cfg``; the tests run
+    from random initialisation.
 
     Args:
         backbone (dict): Backbone config, e.g. ``mmdet.ResNet``.

@@ -126,8 +126,9 @@ class DepthNet(BaseModule):
         depth_bound (Sequence[float], optional): ``(min, max, step)`` of the
             bins in metres, from which ``D`` is derived (the detectors pass
             their own). Defaults to None.
-        position_channels (int): Channels of ``V_coord`` (``3 * D`` for the
-            cylindrical embedding); 0 drops the ``CNN2(V_coord)`` term.
+        position_channels (int): Channels of ``V_coord``
+            (``POSITION_EMBED_DIMS * D`` = ``4 * D`` for the cylindrical
+            embedding); 0 drops the ``CNN2(V_coord)`` term.
             Defaults to 0.
         with_depth_feature (bool): Add ``CNN1(V_depth)``. Defaults to True.
         camera_param_dims (int): Length of the camera parameter vector for
