@@ -92,7 +92,7 @@ def test_format_only_on_a_split_without_labels(world_copy, tmp_path,
     ckpt = _checkpoint(config, str(tmp_path / 'model.pth'))
     work = str(tmp_path / 'work')
     proc = run_tool(
-        'test.py', config, ckpt, '--format-only', '--work-dir', work,
+        'tools/test.py', config, ckpt, '--format-only', '--work-dir', work,
         '--cfg-options',
         f'test_dataloader.dataset.data_root={world_copy}',
         'test_dataloader.dataset.ann_file=nuscenes_occ_infos_test.pkl',

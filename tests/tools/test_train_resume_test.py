@@ -18,9 +18,10 @@ CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ.py')
 
 
 def run_tool(script, *args):
-    """Run ``tools/<script>`` and return the completed process."""
+    """Run a tool (a path relative to the repo root); return the
+    completed process."""
     proc = subprocess.run(
-        [sys.executable, osp.join(ROOT, 'tools', script), *args],
+        [sys.executable, osp.join(ROOT, script), *args],
         cwd=ROOT,
         capture_output=True,
         text=True,
