@@ -46,8 +46,11 @@ visualizer = dict(type='OccLocalVisualizer', vis_backends=vis_backends)
 env_cfg = dict(
     cudnn_benchmark=False,
     mp_cfg=dict(mp_start_method='fork', opencv_num_threads=0),
-    # gloo also runs on CPU-only machines; CUDA users may override to nccl.
-    dist_cfg=dict(backend='gloo'))
+    # nccl, mmdet3d's default and the backend for CUDA tensors. On a
+    # machine without CUDA, tools/train.py and tools/test.py run the ranks
+    # with gloo instead (projects/occ_common/utils/cpu_dist.py), since nccl
+    # needs GPUs.
+    dist_cfg=dict(backend='nccl'))
 
 log_processor = dict(type='LogProcessor', window_size=50, by_epoch=True)
 

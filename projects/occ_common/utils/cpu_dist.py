@@ -16,13 +16,36 @@ import torch
 import torch.distributed as dist
 from mmengine.config import Config
 
+#: Backends that need CUDA devices; a CPU run uses gloo in their place.
+CUDA_ONLY_BACKENDS = ('nccl', )
+
+
+def cpu_backend(dist_cfg: dict) -> str:
+    """The process-group backend of a run without CUDA.
+
+    The configs name nccl, the backend for GPUs (mmdet3d's default); nccl
+    cannot run on the CPU, so a CPU run takes gloo. Another backend a
+    config names (gloo, mpi) is kept.
+
+    Args:
+        dist_cfg (dict): The config's ``env_cfg.dist_cfg``.
+
+    Returns:
+        str: ``'gloo'`` for a missing or CUDA-only backend, else the
+        config's.
+    """
+    backend = dist_cfg.get('backend') or 'gloo'
+    return 'gloo' if backend in CUDA_ONLY_BACKENDS else backend
+
 
 def setup_cpu_distributed(cfg: Config) -> None:
     """Initialise the process group for a CPU run and fix DDP's devices.
 
-    The group is initialised with the config's backend (``env_cfg.
-    dist_cfg.backend``, gloo by default), so the Runner skips its own
-    CUDA-only initialisation, and DDP gets ``device_ids=None``.
+    The group is initialised with :func:`cpu_backend` of the config's
+    ``env_cfg.dist_cfg`` (gloo in place of nccl), so the Runner skips its
+    own CUDA-only initialisation, and DDP gets ``device_ids=None``. On a
+    CUDA machine nothing is done: the Runner initialises the config's
+    backend (nccl) itself.
 
     Args:
         cfg (Config): The config after the command-line overrides; its
@@ -32,7 +55,7 @@ def setup_cpu_distributed(cfg: Config) -> None:
         return
     if not dist.is_initialized():
         dist_cfg = cfg.get('env_cfg', {}).get('dist_cfg', {})
-        dist.init_process_group(backend=dist_cfg.get('backend', 'gloo'))
+        dist.init_process_group(backend=cpu_backend(dist_cfg))
     wrapper = cfg.get('model_wrapper_cfg') or dict(
         type='MMDistributedDataParallel',
         broadcast_buffers=False,
