@@ -39,7 +39,6 @@ or sample and what was expected.
 import argparse
 import copy
 import os.path as osp
-import re
 import sys
 import tempfile
 
@@ -54,8 +53,7 @@ from projects.occ_common.datasets.single_sample import (SampleInfo,
 from projects.occ_common.evaluation.occupancy_export import \
     write_occ3d_prediction
 from projects.occ_common.utils.config_checks import (CfgOptionsAction,
-                                                     apply_cfg_options,
-                                                     cfg_errors_exit)
+                                                     apply_cfg_options)
 from projects.occ_common.utils.safe_pickle import (RefusedGlobalError,
                                                    load_checkpoint_file)
 from projects.occ_common.utils.unlabelled_pipeline import (innermost_dataset,
@@ -132,9 +130,7 @@ def init_model(cfg: Config, checkpoint: str, device: str) -> torch.nn.Module:
         RefusedGlobalError: It pickles code (nothing of it was run).
     """
     from projects.occ_common.hooks.checkpoint_match_hook import \
-        state_dict_mismatch
-    from projects.occ_common.hooks.non_finite_loss_hook import \
-        non_finite_tensors
+        check_checkpoint_state
     if device.startswith('cuda') and not torch.cuda.is_available():
         raise ValueError(f'--device {device}: CUDA is not available here; '
                          'use --device cpu')
@@ -145,17 +141,8 @@ def init_model(cfg: Config, checkpoint: str, device: str) -> torch.nn.Module:
         raise ValueError(f'{checkpoint}: expected a checkpoint dict (a '
                          "state dict or dict(state_dict=...)), got "
                          f'{type(loaded).__name__}')
-    state = {re.sub(r'^module\.', '', k): v for k, v in state.items()}
-    bad = non_finite_tensors(state)
-    if bad:
-        raise ValueError(f'{checkpoint} holds non-finite weights '
-                         f'({len(bad)} tensors: {", ".join(bad[:3])}); it '
-                         'is the checkpoint of a diverged run.')
     model = MODELS.build(cfg.model)
-    found = state_dict_mismatch(model.state_dict(), state)
-    if found:
-        raise ValueError(f'{checkpoint} does not fit the model of '
-                         f'{cfg.filename}: {"; ".join(found)}')
+    state = check_checkpoint_state(model, state, checkpoint, cfg.filename)
     model.load_state_dict(state, strict=False)  # num_batches_tracked
     return model.to(device).eval()
 
@@ -263,5 +250,4 @@ def main(argv=None):
 
 
 if __name__ == '__main__':
-    with cfg_errors_exit():
-        main()
+    main()  # every refusal, a wrong --cfg-options too, ends in one line

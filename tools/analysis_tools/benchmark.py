@@ -71,7 +71,7 @@ from projects.occ_common.utils.benchmarking import (PeakMemory,
                                                     count_gflop, matmul_call,
                                                     matmul_share, summarise)
 from projects.occ_common.utils.config_checks import (cfg_errors_exit,
-                                                     check_cfg_options)
+                                                     merge_cfg_options)
 from projects.occ_common.utils.glibc_malloc import (MMAP_THRESHOLD,
                                                     TRIM_THRESHOLD,
                                                     tune_glibc_malloc)
@@ -161,8 +161,7 @@ def load_config(path: str, options: Optional[dict]) -> Config:
     """Read a config (importing its plugins) and apply the overrides."""
     from mmengine.registry import init_default_scope
     cfg = Config.fromfile(path)
-    if options:
-        cfg.merge_from_dict(check_cfg_options(cfg, options))
+    merge_cfg_options(cfg, options)
     init_default_scope(cfg.get('default_scope', 'mmdet3d'))
     return cfg
 

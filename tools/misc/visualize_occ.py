@@ -36,8 +36,7 @@ import numpy as np
 import torch
 
 from projects.occ_common.utils.config_checks import (CfgOptionsAction,
-                                                     cfg_errors_exit,
-                                                     check_cfg_options)
+                                                     cfg_errors_exit)
 from projects.occ_common.visualization import (convention_classes,
                                                render_data_sample,
                                                sample_field, save_png)
@@ -213,19 +212,14 @@ def predict_sample(args):
         tuple: The output data sample, the packed inputs of the sample,
         and the label settings of the config's metric.
     """
-    from mmengine.config import Config
     from mmengine.dataset import pseudo_collate
     from mmengine.registry import DATASETS
 
     from projects.occ_common.utils import build_trained_model
 
-    options = args.cfg_options
-    if options:
-        options = check_cfg_options(
-            Config.fromfile(args.config), options,
-            getattr(args, 'cfg_options_raw', None))
-    cfg, model = build_trained_model(args.config, args.checkpoint, options,
-                                     args.device)
+    cfg, model = build_trained_model(
+        args.config, args.checkpoint, args.cfg_options, args.device,
+        getattr(args, 'cfg_options_raw', None))
     dataset = DATASETS.build(cfg.test_dataloader.dataset)
     if not 0 <= args.index < len(dataset):
         raise ValueError(f'--index {args.index} is outside the test set of '

@@ -63,6 +63,52 @@ def state_dict_mismatch(model_state: Dict,
     return found
 
 
+def check_checkpoint_state(model,
+                           state: Dict,
+                           source: str,
+                           config: str,
+                           allow_key_mismatch: bool = False,
+                           hint: str = '') -> Dict:
+    """Refuse a state dict with NaN / inf weights or, unless allowed, one
+    that is not ``model``'s.
+
+    Shared by :class:`CheckpointMatchHook` (``tools/test.py``) and
+    ``demo/occ_demo.py``.
+
+    Args:
+        model (nn.Module): The model the weights are for (not a wrapper).
+        state (dict): The checkpoint's ``state_dict``.
+        source (str): The checkpoint's name, for the messages.
+        config (str): The config's file name, for the messages.
+        allow_key_mismatch (bool): Only refuse non-finite weights.
+            Defaults to False.
+        hint (str): Appended to the key-mismatch message (what the caller
+            can do about it). Defaults to ''.
+
+    Returns:
+        dict: ``state`` with any ``module.`` prefix removed.
+
+    Raises:
+        ValueError: Naming the checkpoint and what is wrong.
+    """
+    bad = non_finite_tensors(state)
+    if bad:
+        raise ValueError(
+            f'{source} holds non-finite weights: {_examples(bad)}. It '
+            'is the checkpoint of a diverged run; evaluate the last good'
+            ' one instead.')
+    state = {re.sub(r'^module\.', '', k): v for k, v in state.items()}
+    if allow_key_mismatch:
+        return state
+    found = state_dict_mismatch(model.state_dict(), state)
+    if found:
+        raise ValueError(
+            f'{source} does not fit the model of {config}: '
+            f'{"; ".join(found)}. Evaluating it would report a partly '
+            f'random model.{hint}')
+    return state
+
+
 @HOOKS.register_module()
 class CheckpointMatchHook(Hook):
     """Check the loaded checkpoint against the model before it is used.
@@ -92,24 +138,11 @@ class CheckpointMatchHook(Hook):
         Raises:
             ValueError: Naming the checkpoint and what is wrong.
         """
-        source = runner.cfg.get('load_from') or 'the checkpoint'
-        state = checkpoint.get('state_dict', checkpoint)
-        bad = non_finite_tensors(state)
-        if bad:
-            raise ValueError(
-                f'{source} holds non-finite weights: {_examples(bad)}. It '
-                'is the checkpoint of a diverged run; evaluate the last good'
-                ' one instead.')
-        if self.allow_key_mismatch:
-            return
         model = runner.model.module if is_model_wrapper(
             runner.model) else runner.model
-        state = {re.sub(r'^module\.', '', k): v for k, v in state.items()}
-        found = state_dict_mismatch(model.state_dict(), state)
-        if found:
-            raise ValueError(
-                f'{source} does not fit the model of '
-                f'{runner.cfg.filename}: {"; ".join(found)}. Evaluating it '
-                'would report a partly random model. Check the config and '
-                'the checkpoint, or pass --allow-key-mismatch to evaluate '
-                'anyway.')
+        check_checkpoint_state(
+            model, checkpoint.get('state_dict', checkpoint),
+            runner.cfg.get('load_from') or 'the checkpoint',
+            runner.cfg.filename, self.allow_key_mismatch,
+            ' Check the config and the checkpoint, or pass '
+            '--allow-key-mismatch to evaluate anyway.')

@@ -291,6 +291,44 @@ def cfg_errors_exit(prog: Optional[str] = None) -> Iterator[None]:
         raise SystemExit(2) from None
 
 
+def merge_cfg_options(cfg,
+                      options: Dict[str, Any],
+                      raw: Optional[Dict[str, str]] = None,
+                      option: str = '--cfg-options') -> List[str]:
+    """Check overrides (:func:`check_cfg_options`), merge them into
+    ``cfg`` and check the top level they leave.
+
+    Args:
+        cfg (mmengine.Config): The loaded config, changed in place.
+        options (dict): Parsed overrides (``DictAction``).
+        raw (dict, optional): The typed text of each value
+            (:class:`CfgOptionsAction`).
+        option (str): The command-line option, for the messages.
+            Defaults to '--cfg-options'.
+
+    Returns:
+        list[str]: The overridden keys.
+
+    Raises:
+        CfgOptionsError: A ``ValueError``, if an override has the wrong
+            kind, cannot be merged, or adds a top-level typo.
+    """
+    if not options:
+        return []
+    options = check_cfg_options(cfg, options, raw)
+    try:
+        cfg.merge_from_dict(options)
+    except (TypeError, KeyError, IndexError, AssertionError) as err:
+        # What the checks above do not foresee still ends in one line.
+        raise CfgOptionsError(f'{option}: cannot merge {sorted(options)} '
+                              f'into the config ({err})') from err
+    try:
+        check_top_level_keys(cfg.keys(), option)
+    except ValueError as err:
+        raise CfgOptionsError(str(err)) from err
+    return sorted(options)
+
+
 def apply_cfg_options(cfg, args, dest: str = 'cfg_options') -> List[str]:
     """Check and merge ``args.<dest>`` into ``cfg``; check the top level.
 
@@ -309,27 +347,13 @@ def apply_cfg_options(cfg, args, dest: str = 'cfg_options') -> List[str]:
             kind, cannot be merged, or adds a top-level typo.
     """
     check_top_level_keys(cfg.keys(), cfg.filename or '<config>')
-    options = getattr(args, dest, None)
-    if not options:
-        return []
-    option = f'--{dest.replace("_", "-")}'
-    options = check_cfg_options(cfg, options,
-                                getattr(args, f'{dest}_raw', None))
-    try:
-        cfg.merge_from_dict(options)
-    except (TypeError, KeyError, IndexError, AssertionError) as err:
-        # What the checks above do not foresee still ends in one line.
-        raise CfgOptionsError(f'{option}: cannot merge {sorted(options)} '
-                              f'into the config ({err})') from err
-    try:
-        check_top_level_keys(cfg.keys(), option)
-    except ValueError as err:
-        raise CfgOptionsError(str(err)) from err
-    return sorted(options)
+    return merge_cfg_options(cfg, getattr(args, dest, None),
+                             getattr(args, f'{dest}_raw', None),
+                             f'--{dest.replace("_", "-")}')
 
 
 __all__ = [
     'CfgOptionsAction', 'CfgOptionsError', 'apply_cfg_options',
     'cfg_errors_exit', 'check_cfg_options', 'check_top_level_keys',
-    'edit_distance', 'runner_keys'
+    'edit_distance', 'merge_cfg_options', 'runner_keys'
 ]

@@ -7,7 +7,9 @@ from torch import nn
 def build_trained_model(config: str,
                         checkpoint: str,
                         cfg_options: Optional[dict] = None,
-                        device: str = 'cpu') -> Tuple[object, nn.Module]:
+                        device: str = 'cpu',
+                        cfg_options_raw: Optional[dict] = None
+                        ) -> Tuple[object, nn.Module]:
     """Build ``config``'s model and load ``checkpoint`` into it.
 
     The config's ``custom_imports`` register the plugins; the weights come
@@ -18,8 +20,11 @@ def build_trained_model(config: str,
         config (str): Config file.
         checkpoint (str): Weights (a Runner checkpoint or a state dict).
         cfg_options (dict, optional): Overrides merged into the config, as
-            ``--cfg-options`` gives them. Defaults to None.
+            ``--cfg-options`` gives them, checked by
+            :func:`~.config_checks.merge_cfg_options`. Defaults to None.
         device (str): Where the model goes. Defaults to 'cpu'.
+        cfg_options_raw (dict, optional): The typed text of each override
+            (:class:`~.config_checks.CfgOptionsAction`). Defaults to None.
 
     Returns:
         tuple: ``(cfg, model)``, the merged config and the model in eval
@@ -29,12 +34,11 @@ def build_trained_model(config: str,
     from mmengine.registry import MODELS, init_default_scope
     from mmengine.runner import load_checkpoint
 
-    from .config_checks import check_cfg_options
+    from .config_checks import merge_cfg_options
     from .safe_pickle import install_checkpoint_loader
 
     cfg = Config.fromfile(config)
-    if cfg_options:
-        cfg.merge_from_dict(check_cfg_options(cfg, cfg_options))
+    merge_cfg_options(cfg, cfg_options, cfg_options_raw)
     init_default_scope(cfg.get('default_scope', 'mmdet3d'))
     model = MODELS.build(cfg.model)
     # Nothing is installed on import: load through the restricted loader.
