@@ -11,8 +11,6 @@ from projects.occ_common.testing.tool_logs import load_tool
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ.py')
-SDG_CONFIG = osp.join(ROOT, 'configs', 'sdg_occ',
-                      'sdgocc-fusion_r50_4xb2-24e_occ3d-nus.py')
 
 
 def _tool():
@@ -100,8 +98,8 @@ def test_compare_identical_models(tmp_path, capsys):
     assert 'ratio 2/1' in capsys.readouterr().out
 
 
-def test_ratios_and_synthetic_batch_errors():
-    """A zero denominator gives None; a config without shapes is named."""
+def test_ratios_and_argument_errors():
+    """A zero denominator gives None; no runs is refused."""
     tool = _tool()
     first = dict(params=0, latency_ms=dict(median=2.0),
                  cpu_ms=dict(median=4.0), gflop=0.5, forward_memory_mb=0.5)
@@ -110,38 +108,8 @@ def test_ratios_and_synthetic_batch_errors():
     assert tool.ratios(first, second) == dict(
         params=None, latency_median=1.5, cpu_median=1.25, gflop=2.0,
         forward_memory=None)
-    cfg = tool.load_config(CONFIG, None)
-    with pytest.raises(ValueError, match='declares neither'):
-        tool.synthetic_batch(cfg, 1, None)
     with pytest.raises(SystemExit):
         tool.parse_args([CONFIG, '--runs', '0'])
-
-
-def test_lidar_like_cloud_lies_in_range():
-    """All points inside the range, on the ground (z = -1.84) or walls."""
-    tool = _tool()
-    gen = np.random.default_rng(0)
-    pc_range = (-40.0, -40.0, -1.0 - 1.0, 40.0, 40.0, 5.4)
-    points = tool.lidar_like_cloud(500, pc_range, 5, gen)
-    assert points.shape == (500, 5) and points.dtype == np.float32
-    assert (points[:, :3] >= np.array(pc_range[:3])).all()
-    assert (points[:, :3] < np.array(pc_range[3:])).all()
-    assert np.isclose(points[:, 2], -1.84, atol=1e-4).mean() > 0.2
-
-
-def test_synthetic_cloud_has_one_key_frame_sweep():
-    """11 sweeps of 10 points each: 10 points with lag 0 (the key frame),
-    then 0.05 s steps up to 0.5 s; the batch names the time column, so
-    key-frame-only steps (SDG's depth guidance) see one sweep."""
-    tool = _tool()
-    points = tool.with_sweep_time(np.zeros((110, 5), np.float32), 11)
-    assert (points[:, 4] == 0).sum() == 10
-    assert np.allclose(np.unique(points[:, 4]), 0.05 * np.arange(11))
-    cfg = tool.load_config(SDG_CONFIG, None)
-    batch, description = tool.synthetic_batch(cfg, 1, 220)
-    assert batch['data_samples'][0].metainfo['points_time_dim'] == 4
-    assert int((batch['inputs']['points'][0][:, 4] == 0).sum()) == 20
-    assert '220 points in 11 sweeps' in description
 
 
 def test_train_mode_steps_the_optimiser():
@@ -168,45 +136,3 @@ def test_train_mode_steps_the_optimiser():
     assert reports['train']['gflop'] * 1e9 == pytest.approx(2 * 4608)
     with pytest.raises(SystemExit):
         tool.parse_args([CONFIG, '--train', '--fuse-conv-bn'])
-
-
-def test_synthetic_training_targets():
-    """Labels: 90 % empty (index 0 of the config), every one of the 17
-    classes present, int64; depth: 2 % of the pixels at 1-60 m."""
-    from mmengine.config import Config
-    tool = _tool()
-    gen = np.random.default_rng(0)
-    cfg = Config(dict(model=dict(num_classes=17, empty_index=0)))
-    occ = tool.synthetic_labels((40, 40, 8), cfg, gen)
-    assert occ.dtype == torch.long and occ.shape == (40, 40, 8)
-    assert (occ == 0).float().mean() == pytest.approx(0.9 + 0.1 / 17,
-                                                      abs=0.01)
-    assert set(occ.unique().tolist()) == set(range(17))
-    depth = tool.synthetic_depth(2, (30, 40), gen)
-    assert depth.shape == (2, 30, 40) and depth.dtype == torch.float32
-    hit = depth > 0
-    assert hit.float().mean() == pytest.approx(0.02, abs=0.01)
-    assert depth[hit].min() >= 1.0 and depth[hit].max() < 60.0
-
-
-def test_synthetic_training_batch_has_what_the_losses_read():
-    """SDG-Fusion on Occ3D (``--train --synthetic-batch``) reads its
-    ``mask_camera`` (loss_mask_key) and the 2-D semantic maps: the mask is
-    a bool 200 x 200 x 16 grid, about half set; ``gt_seg_2d`` has a class
-    in 1..16 exactly where the depth map has a return and the ignore label
-    255 elsewhere. Without labels neither is made."""
-    tool = _tool()
-    cfg = tool.load_config(SDG_CONFIG, None)
-    batch, _ = tool.synthetic_batch(cfg, 1, 220, labels=True)
-    sample = batch['data_samples'][0]
-    mask = sample.mask_camera
-    assert mask.dtype == torch.bool and mask.shape == (200, 200, 16)
-    assert mask.float().mean() == pytest.approx(0.5, abs=0.01)
-    seg, depth = sample.gt_seg_2d, sample.gt_depth
-    assert seg.dtype == torch.uint8 and seg.shape == depth.shape
-    hit = depth > 0
-    assert ((seg != 255) == hit).all()
-    assert set(seg[hit].unique().tolist()) == set(range(1, 17))
-    plain, _ = tool.synthetic_batch(cfg, 1, 220)
-    assert 'mask_camera' not in plain['data_samples'][0]
-    assert 'gt_seg_2d' not in plain['data_samples'][0]
