@@ -58,8 +58,9 @@ class SDGOcc(BaseOccDetector):
 
     Args:
         img_backbone (dict): Image backbone (e.g. ``mmdet.ResNet``).
-        img_neck (dict): Image neck to stride ``downsample`` (``mmdet.FPN``);
-            its first output is used.
+        img_neck (dict): Image neck to stride ``downsample``
+            (``SelectiveFPN``); its first output is used, so a neck should
+            build no other (DDP refuses parameters without gradient).
         depth_net (dict): ``DepthNet``; ``seg_channels > 0`` for the SDG
             lift.
         view_transform (dict): ``SDGViewTransform``.

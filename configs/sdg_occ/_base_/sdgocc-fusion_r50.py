@@ -63,11 +63,14 @@ model = dict(
             checkpoint='torchvision://resnet50',
             style='pytorch',
             ignore=[r'^fc\.'])),  # the ImageNet classifier
+    # The FPN over the 1/16 and 1/32 stages, "down-sampled to 1/16"
+    # (Sec. 3.3): mmdet's FPN without the 1/32 output convolution, which
+    # nothing reads and whose unused weights DDP refuses.
     img_neck=dict(
-        type='mmdet.FPN',
+        type='SelectiveFPN',
         in_channels=[1024, 2048],
         out_channels=_img_channels,
-        num_outs=2),  # the 1/16 output (index 0) is used
+        out_indices=(0, )),
     depth_net=dict(
         type='DepthNet',
         in_channels=_img_channels,

@@ -1,7 +1,9 @@
-"""Models shared by the occupancy plugins: the base detector, a backbone,
-losses, layers, the sparse backend and checked pretrained-weight loading."""
-from . import backbones, detectors, layers, losses, pretrained, sparse
+"""Models shared by the occupancy plugins: the base detector, backbones, a
+neck, losses, layers, the sparse backend and checked pretrained-weight
+loading."""
+from . import backbones, detectors, layers, losses, necks, pretrained, sparse
 
 __all__ = [
-    'backbones', 'detectors', 'layers', 'losses', 'pretrained', 'sparse'
+    'backbones', 'detectors', 'layers', 'losses', 'necks', 'pretrained',
+    'sparse'
 ]
