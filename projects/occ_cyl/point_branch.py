@@ -95,7 +95,7 @@ def sample_image_features(xyz: Tensor,
     in_h, in_w = float(input_shape[0]), float(input_shape[1])
     grid = torch.stack(
         [uv[cam, point, 0] / in_w * 2 - 1, uv[cam, point, 1] / in_h * 2 - 1],
-        dim=-1).to(feats)
+        dim=-1).to(torch.promote_types(uv.dtype, feats.dtype))
     sums = feats.new_zeros(xyz.shape[0], channels)
     if point.numel() == 0:
         # Nothing visible: zeros that stay connected to ``feats``, as the
@@ -109,7 +109,9 @@ def sample_image_features(xyz: Tensor,
         for n, cam_grid in enumerate(pieces) if cam_grid.shape[0] > 0
     ])  # (K, C), K visible pairs
     # Camera by camera, as the sum over cameras it replaces.
-    sums.index_add_(0, point, sampled)
+    # (grid_sample returns float32 under CPU autocast and for a float32
+    # grid under CUDA's, whatever the features' dtype.)
+    sums.index_add_(0, point, sampled.to(sums.dtype))
     count = visible.sum(dim=0).clamp(min=1).to(feats.dtype)
     return sums / count.unsqueeze(1)
 
@@ -202,8 +204,11 @@ class LidarPointBranch(BaseModule):
                     f'{tuple(pts.shape)}, expected (P, {self.in_channels})')
         counts = [p.shape[0] for p in points]
         # One MLP call over the whole batch keeps BatchNorm statistics
-        # batch-wide, as for any other layer.
-        pts = torch.cat(points, dim=0).to(context.dtype)
+        # batch-wide, as for any other layer. Coordinates keep at least
+        # their own precision: under --amp the context is float16 /
+        # bfloat16, which would move a point at 50 m by up to 0.25 m.
+        dtype = torch.promote_types(points[0].dtype, context.dtype)
+        pts = torch.cat(points, dim=0).to(dtype)
         if pts.shape[0] == 0:
             # BatchNorm cannot run on zero rows; the empty result stays
             # connected to the weights so backward still works.
@@ -217,7 +222,7 @@ class LidarPointBranch(BaseModule):
         fused = [run_mlp(self.geo_mlp, geo_in)]
         if self.with_image_features:
             img_feats = [
-                sample_image_features(xyz[:, :3].to(context.dtype),
+                sample_image_features(xyz[:, :3].to(dtype),
                                       context[i], lidar2img[i], input_shape,
                                       img_shapes[i])
                 for i, xyz in enumerate(points)

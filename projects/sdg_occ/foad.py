@@ -16,6 +16,8 @@ from mmdet3d.registry import MODELS
 from mmengine.model import BaseModule
 from torch import Tensor
 
+from projects.occ_common.utils.precision import float32_math
+
 
 def _check_mask(mask: Tensor, name: str) -> None:
     if mask.dim() != 4 or mask.shape[1] != 1:
@@ -89,6 +91,7 @@ class FOADDistillLoss(BaseModule):
         self.beta = beta
         self.loss_weight = loss_weight
 
+    @float32_math
     def forward(self, student: Tensor, teacher: Tensor, fused_mask: Tensor,
                 img_mask: Tensor) -> Tensor:
         """Distillation loss of the student BEV towards the teacher BEV.

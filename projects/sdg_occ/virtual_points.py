@@ -36,6 +36,7 @@ import torch
 from torch import Tensor
 
 from projects.occ_common.geometry.depth import num_depth_bins
+from projects.occ_common.utils.precision import float32_math
 
 
 def virtual_point_offsets(radius: float, num_layers: int,
@@ -60,6 +61,7 @@ def virtual_point_offsets(radius: float, num_layers: int,
     return steps * (radius / num_layers)
 
 
+@float32_math
 def virtual_point_depths(ext_depth: Tensor, radius: float,
                          num_layers: int) -> Tensor:
     """Depths of the virtual points spawned by each pixel.
@@ -79,6 +81,7 @@ def virtual_point_depths(ext_depth: Tensor, radius: float,
     return ext_depth.unsqueeze(1) + offsets.view(1, -1, 1, 1)
 
 
+@float32_math
 def interpolate_depth_prob(depth_prob: Tensor, depths: Tensor,
                            depth_bound: Sequence[float]) -> Tensor:
     """Linearly interpolate a per-pixel depth distribution at given depths.
@@ -122,6 +125,7 @@ def interpolate_depth_prob(depth_prob: Tensor, depths: Tensor,
     return (1 - frac) * p_lower + frac * p_upper
 
 
+@float32_math
 def bilinear_incremental_discretization(
         ext_depth: Tensor, depth_prob: Tensor, depth_bound: Sequence[float],
         radius: float, num_layers: int) -> Tuple[Tensor, Tensor, Tensor]:

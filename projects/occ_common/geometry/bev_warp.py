@@ -19,6 +19,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
+from ..utils.precision import float32_math
+
 
 def relative_pose(prev_lidar2global: np.ndarray,
                   curr_lidar2global: np.ndarray,
@@ -56,6 +58,7 @@ def relative_pose(prev_lidar2global: np.ndarray,
     return rel
 
 
+@float32_math
 def warp_bev(prev_bev: Tensor, prev2curr: Tensor,
              point_cloud_range: Sequence[float],
              mode: str = 'bilinear') -> Tensor:

@@ -27,6 +27,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
+from ..utils.precision import float32_math
+
 ArrayOrTensor = Union[np.ndarray, Tensor]
 
 
@@ -110,6 +112,7 @@ class _Ops:
             if self.torch else np.zeros(0, dtype=np.int64)
 
 
+@float32_math
 def project_points(points: Tensor,
                    lidar2img: Tensor,
                    eps: float = 1e-5) -> Tuple[Tensor, Tensor]:
@@ -197,6 +200,7 @@ def project_nearest(
     return view[win], row[win], col[win], depth[win], index[win]
 
 
+@float32_math
 def nearest_depth_map(points: Tensor,
                       lidar2img: Tensor,
                       img_shape: Sequence[int],
@@ -266,6 +270,7 @@ def patch_min_depth(gt_depth: Tensor, downsample: int) -> Tensor:
                        nearest)
 
 
+@float32_math
 def depth_to_bins(gt_depth: Tensor,
                   downsample: int,
                   depth_bound: Sequence[float],

@@ -28,6 +28,7 @@ from torch import Tensor, nn
 
 from ...geometry.depth import num_depth_bins
 from ...geometry.seg_targets import downsample_seg_labels
+from ...utils.precision import float32_math
 from ..layers.camera_geometry import camera_parameter_vector, lidar2img_matrix
 from ..pretrained import check_entries, load_pretrained
 
@@ -318,6 +319,7 @@ class BaseOccDetector(Base3DDetector):
             depth = F.pad(depth, (0, pad_w, 0, pad_h))
         return depth.flatten(0, 1)
 
+    @float32_math
     def depth_losses(self, depth: Tensor, gt_depth: Tensor
                      ) -> Dict[str, Tensor]:
         """``loss_depth`` of the predicted depth bins, if configured.
@@ -361,6 +363,7 @@ class BaseOccDetector(Base3DDetector):
         return downsample_seg_labels(
             gt_seg, gt_depth, downsample, empty_label=self.seg_empty_label)
 
+    @float32_math
     def seg_losses(self, depth_out: Dict[str, Tensor],
                    samples: Sequence[Det3DDataSample], gt_depth: Tensor,
                    downsample: int) -> Dict[str, Tensor]:

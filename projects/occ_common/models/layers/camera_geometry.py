@@ -27,6 +27,7 @@ import torch
 from torch import Tensor
 
 from ...geometry.depth import depth_bin_values
+from ...utils.precision import float32_math
 from .cylindrical_coords import cartesian_to_cylindrical
 
 
@@ -57,6 +58,7 @@ def create_frustum(img_shape: Sequence[int], feat_shape: Sequence[int],
     return torch.stack([u, v, d], dim=-1)
 
 
+@float32_math
 def lidar2img_matrix(cam2img: Tensor, lidar2cam: Tensor,
                      img_aug_matrix: Tensor) -> Tensor:
     """Full projection ``img_aug @ cam2img @ lidar2cam``.
@@ -77,6 +79,7 @@ def lidar2img_matrix(cam2img: Tensor, lidar2cam: Tensor,
     return img_aug_matrix @ cam2img @ lidar2cam
 
 
+@float32_math
 def frustum_to_lidar(frustum: Tensor, lidar2img: Tensor) -> Tensor:
     """Lift every frustum point ``(u, v, d)`` into the working frame.
 
@@ -103,6 +106,7 @@ def frustum_to_lidar(frustum: Tensor, lidar2img: Tensor) -> Tensor:
 POSITION_EMBED_DIMS = 4
 
 
+@float32_math
 def cylindrical_position_embedding(points: Tensor,
                                    cyl_range: Sequence[float]) -> Tensor:
     """Cylindrical coordinates of the frustum: ``V_coord`` (eq. 5).
@@ -146,6 +150,7 @@ def cylindrical_position_embedding(points: Tensor,
     return emb.permute(0, 1, 2, 5, 3, 4).reshape(b * n, d * c, h, w)
 
 
+@float32_math
 def camera_parameter_vector(cam2img: Tensor, lidar2cam: Tensor,
                             img_aug_matrix: Tensor) -> Tensor:
     """Per-camera parameters for BEVDepth's camera-aware depth prediction.

@@ -10,7 +10,10 @@ lives here rather than in ``projects/occ_cyl`` because the shared
 import torch
 from torch import Tensor
 
+from ...utils.precision import float32_math
 
+
+@float32_math
 def cartesian_to_cylindrical(xyz: Tensor) -> Tensor:
     """Convert Cartesian ``(x, y, z)`` to cylindrical ``(r, theta, z)``.
 
@@ -33,6 +36,7 @@ def cartesian_to_cylindrical(xyz: Tensor) -> Tensor:
     return torch.stack([r, theta, z], dim=-1)
 
 
+@float32_math
 def cylindrical_to_cartesian(rtz: Tensor) -> Tensor:
     """Convert cylindrical ``(r, theta, z)`` to Cartesian ``(x, y, z)``.
 

@@ -16,6 +16,7 @@ import torch.nn as nn
 from mmdet3d.registry import MODELS
 from torch import Tensor
 
+from ...utils.precision import float32_math
 from .occupancy_gt_downsample import downsample_occupancy_gt
 from .utils import SupervisedVoxels, supervised_voxels, zero_with_grad
 
@@ -103,6 +104,7 @@ class OccupancyLossTerm(nn.Module):
             return zero_with_grad(logits)
         return self.loss_weight * loss
 
+    @float32_math
     def forward(self, logits: Tensor, target: Tensor) -> Tensor:
         """The term on one prediction (shapes in the class docstring)."""
         if logits.dim() >= 2:
@@ -221,6 +223,7 @@ class OccupancyLoss(nn.Module):
             for name, loss in zip(self.term_names, self.losses)
         }
 
+    @float32_math
     def forward(self,
                 logits: Tensor,
                 target: Tensor,
@@ -274,6 +277,7 @@ class MultiScaleOccupancyLoss(OccupancyLoss):
         super().__init__(losses, empty_index, ignore_index)
         self.num_scales = num_scales
 
+    @float32_math
     def forward(self,
                 logits: Sequence[Tensor],
                 target: Tensor,
