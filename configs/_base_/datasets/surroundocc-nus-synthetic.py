@@ -7,9 +7,13 @@
 _base_ = ['./surroundocc-nus.py']
 
 data_root = 'data/nuscenes_synthetic/'
-# Worker processes only add start-up time on a world of a few samples.
+# Worker processes only add start-up time on a world of a few samples;
+# these configs train on the CPU, where there is no device memory to pin for.
 _loader = dict(
-    num_workers=0, persistent_workers=False, dataset=dict(data_root=data_root))
+    num_workers=0,
+    persistent_workers=False,
+    pin_memory=False,
+    dataset=dict(data_root=data_root))
 train_dataloader = _loader
 val_dataloader = _loader
 test_dataloader = val_dataloader
