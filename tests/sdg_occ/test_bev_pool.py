@@ -139,6 +139,7 @@ def test_bad_inputs_raise():
             PC_RANGE[:4], BEV_SHAPE)
 
 
+@pytest.mark.cuda
 @pytest.mark.skipif(not torch.cuda.is_available(), reason='needs CUDA')
 def test_cuda_matches_cpu():
     gen = torch.Generator().manual_seed(1)

@@ -193,6 +193,7 @@ def test_bad_inputs_raise():
         fusion(torch.zeros(1, 3, 4, 4), torch.zeros(1, 4, 4, 4))
 
 
+@pytest.mark.cuda
 @pytest.mark.skipif(not torch.cuda.is_available(), reason='needs CUDA')
 def test_cuda_matches_cpu():
     gen = torch.Generator().manual_seed(0)

@@ -26,6 +26,7 @@ def test_equals_torch_cross_entropy_in_value_and_gradient():
     torch.testing.assert_close(grad_ours, grad_theirs)
 
 
+@pytest.mark.cuda
 @pytest.mark.skipif(not torch.cuda.is_available(), reason='needs CUDA')
 def test_runs_on_cuda_in_deterministic_mode_where_nll_loss_refuses():
     """The resume tests train with ``randomness.deterministic=True``: on

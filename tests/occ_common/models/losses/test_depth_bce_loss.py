@@ -134,6 +134,7 @@ def test_depth_loss_under_autocast(monkeypatch):
     assert torch.isfinite(pred.grad).all()
 
 
+@pytest.mark.cuda
 @pytest.mark.skipif(not torch.cuda.is_available(), reason='needs CUDA')
 def test_depth_loss_under_cuda_autocast():
     """Real CUDA float16 autocast: no 'unsafe to autocast' error, and the

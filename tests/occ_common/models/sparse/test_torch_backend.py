@@ -311,6 +311,7 @@ def test_rulebook_keys_are_linear_order():
     assert torch.all(keys[1:] > keys[:-1])
 
 
+@pytest.mark.cuda
 @pytest.mark.skipif(not torch.cuda.is_available(), reason='needs CUDA')
 def test_torch_backend_cuda_matches_cpu():
     """The torch backend gives the same outputs and gradients on CUDA."""
