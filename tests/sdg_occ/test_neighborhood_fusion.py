@@ -202,3 +202,93 @@ def test_cuda_matches_cpu():
     ref = neighborhood_attention(q, k, v, bias, 5)
     out = neighborhood_attention(q.cuda(), k.cuda(), v.cuda(), bias.cuda(), 5)
     assert torch.allclose(out.cpu(), ref, atol=1e-5)
+
+
+def _strip_attention(q, k, v, bias, ksize, border):
+    """The border handling before issue 46, kept as the reference of the
+    gathered border cells: four strips, each a Python loop over the k * k
+    window slots with two ``index_select`` a slot; the interior by the
+    per-slot views (which the rewrite keeps)."""
+    height, width = q.shape[-2:]
+    reach = ksize // 2
+    scale = 1.0 / math.sqrt(q.shape[2])
+
+    def strip(rows, cols):
+        rows, cols = torch.arange(*rows), torch.arange(*cols)
+        queries = q.index_select(3, rows).index_select(4, cols)
+        key_rows, row_in, bias_rows = nf._window_slots(height, ksize, border,
+                                                       rows)
+        key_cols, col_in, bias_cols = nf._window_slots(width, ksize, border,
+                                                       cols)
+        logits = []
+        for a in range(ksize):
+            keys_a = k.index_select(3, key_rows[a])
+            bias_a = bias[:, bias_rows[a]]
+            for c in range(ksize):
+                logit = (queries * keys_a.index_select(4, key_cols[c])).sum(2)
+                logit = logit * scale + bias_a[:, :, bias_cols[c]]
+                inside = row_in[a].view(-1, 1) & col_in[c].view(1, -1)
+                logits.append(logit.masked_fill(~inside, float('-inf')))
+        attn = torch.stack(logits, dim=2).softmax(dim=2)
+        out = 0
+        for a in range(ksize):
+            values_a = v.index_select(3, key_rows[a])
+            for c in range(ksize):
+                out = out + attn[:, :, a * ksize + c:a * ksize + c + 1] * \
+                    values_a.index_select(4, key_cols[c])
+        return out
+
+    inner = nf._attend_inner(q * scale, k, v, bias, ksize)
+    middle = torch.cat([
+        strip((reach, height - reach), (0, reach)), inner,
+        strip((reach, height - reach), (width - reach, width))
+    ], dim=4)
+    return torch.cat([
+        strip((0, reach), (0, width)), middle,
+        strip((height - reach, height), (0, width))
+    ], dim=3)
+
+
+@pytest.mark.parametrize('border', ['shift', 'mask'])
+def test_gathered_border_matches_the_strips_it_replaces(border):
+    """SDG-OCC's k = 7 on a 17 x 19 map, batch 2: the border cells'
+    one-gather path gives the previous strips' values and the gradients of
+    q, k, v and the bias table, within float rounding."""
+    gen = torch.Generator().manual_seed(7)
+    q, k, v = (torch.randn(2, 4, 8, 17, 19, generator=gen).requires_grad_()
+               for _ in range(3))
+    bias = torch.randn(4, 13, 13, generator=gen).requires_grad_()
+    new = neighborhood_attention(q, k, v, bias, 7, border)
+    old = _strip_attention(q, k, v, bias, 7, border)
+    assert torch.allclose(new, old, atol=1e-5)
+    grad_out = torch.randn_like(new)
+    for got, want in zip(
+            torch.autograd.grad(new, (q, k, v, bias), grad_out),
+            torch.autograd.grad(old, (q, k, v, bias), grad_out)):
+        assert torch.allclose(got, want, atol=1e-5)
+
+
+def test_launches_do_not_grow_with_the_batch(monkeypatch):
+    """Off the CPU's row blocks (what a GPU runs), the attention's
+    operator count is the same at batch 1 and batch 4: the border cells
+    are one gather, the interior one pass of k * k slots, and no call
+    after the first (which builds the border indices of the map shape)
+    waits for the device. Counted with the CPU's blocking off: the block
+    decision is the only device-dependent step."""
+    from projects.occ_common.utils.op_counting import OpCounter
+    monkeypatch.setattr(nf, 'BLOCK_BYTES', 1 << 40)  # one block, as a GPU
+    counts = []
+    for batch in (1, 4):
+        module = NeighborhoodFusion(8, 8, 8, embed_dims=8, num_heads=2)
+        source, cross = torch.randn(2, batch, 8, 40, 40)
+        with torch.no_grad():
+            module(source, cross)  # the border indices, once per shape
+        counter = OpCounter(torch.nn.Sequential(module))
+        with torch.no_grad(), counter:
+            module(source, cross)
+        counts.append(counter.totals())
+    assert counts[0] == counts[1]
+    assert counts[0]['syncs'] == 0
+    # 49 slot products (mul, sum) and 49 weighted values (mul, add) make
+    # ~200 of them; the border, the projections and the gate ~40.
+    assert counts[0]['launches'] < 260
