@@ -4,8 +4,10 @@ A rulebook lists, for every kernel offset ``k``, the pairs ``(i, o)`` such
 that input site ``i`` contributes to output site ``o`` through the weight
 slice ``W[:, k]``. It is built with tensor ops only: coordinates are
 linearised to int64 keys, sorted once, and neighbour queries are
-``searchsorted`` calls into the sorted keys (one per run of x-neighbours,
-see :meth:`CoordIndex.query_run`), so it runs unchanged on CPU and CUDA.
+``searchsorted`` calls into the sorted keys, so it runs on CPU and CUDA.
+GPUs take the vectorised builders (all kernel offsets at once: a fixed
+number of launches and two host syncs whatever the kernel volume), the
+CPU the per-offset loops, faster there (:func:`submanifold_rulebook`).
 
 Offsets are enumerated row-major over ``(k_z, k_y, k_x)``, the order of
 spconv's weight layout ``(C_out, k_z, k_y, k_x, C_in)``. The geometry is
@@ -24,6 +26,8 @@ from typing import List, Optional, Sequence, Tuple
 
 import torch
 from torch import Tensor
+
+from ...utils.device_path import accelerator_path
 
 Triple = Tuple[int, int, int]
 
@@ -191,11 +195,55 @@ class Rulebook:
         self.subm = subm
         self.dilation = tuple(dilation)
         self.center = center
+        self._padded: Optional[Tuple[Tensor, Tensor, Tensor]] = None
 
     @property
     def num_pairs(self) -> int:
         """int: Total number of (input, output) pairs over all offsets."""
         return sum(int(idx.numel()) for idx in self.in_indices)
+
+    def padded_pairs(self) -> Tuple[Tensor, Tensor, Tensor]:
+        """The pairs of every non-centre offset with pairs, padded to one
+        (K', P_max) block, for one batched gather-matmul-scatter.
+
+        Built once per rulebook (layers sharing an ``indice_key`` share
+        it) from the per-offset lengths, which the host already knows: no
+        sync. Padding pairs read input row N (a zero row the caller
+        appends) and write output row M (dropped by the caller).
+
+        Returns:
+            tuple[Tensor, Tensor, Tensor]: The offsets ``k`` (K',), and
+            int64 input and output rows, each Shape (K', P_max).
+        """
+        if self._padded is None:
+            ids = [
+                k for k, rows in enumerate(self.in_indices)
+                if k != self.center and rows.numel() > 0
+            ]
+            counts = [int(self.in_indices[k].numel()) for k in ids]
+            device = self.in_coords.device
+            width = max(counts, default=0)
+            in_pad = torch.full((len(ids), width), self.in_coords.shape[0],
+                                dtype=torch.long, device=device)
+            out_pad = torch.full((len(ids), width),
+                                 self.out_coords.shape[0], dtype=torch.long,
+                                 device=device)
+            if ids:
+                total = sum(counts)
+                slot = torch.repeat_interleave(
+                    torch.arange(len(ids), device=device),
+                    torch.tensor(counts, device=device), output_size=total)
+                starts = torch.tensor(
+                    [sum(counts[:i]) for i in range(len(ids))],
+                    device=device)
+                pos = torch.arange(total, device=device) - starts[slot]
+                in_pad[slot, pos] = torch.cat(
+                    [self.in_indices[k] for k in ids]).long()
+                out_pad[slot, pos] = torch.cat(
+                    [self.out_indices[k] for k in ids]).long()
+            self._padded = (torch.tensor(ids, dtype=torch.long,
+                                         device=device), in_pad, out_pad)
+        return self._padded
 
     def inverted(self) -> 'Rulebook':
         """Rulebook of the inverse convolution (outputs become inputs).
@@ -223,13 +271,144 @@ def in_bounds(zyx: Tensor, shape: Sequence[int]) -> Tensor:
     return ((zyx >= 0) & (zyx < upper)).all(dim=1)
 
 
+def _hits(hit: Tensor) -> Tuple[Tensor, Tensor, List[int]]:
+    """The (offset, row) pairs of a (K, N) hit mask and the K counts.
+
+    One ``nonzero`` over all offsets (row-major: by offset, then by row,
+    the order a per-offset loop gives) and one read of the counts: two
+    host syncs a rulebook instead of one or two per offset.
+
+    Args:
+        hit (Tensor): bool. Shape (K, N).
+
+    Returns:
+        tuple[Tensor, Tensor, list[int]]: Offset and row of every hit,
+        each Shape (P,), and the hits per offset.
+    """
+    offset, rows = hit.nonzero(as_tuple=True)
+    return offset, rows, hit.sum(dim=1).tolist()
+
+
+def _kernel_offsets(kernel_size: Triple, step: Sequence[int],
+                    device) -> Tensor:
+    """Row-major ``(k_z, k_y, k_x)`` grid of offsets ``index * step``.
+
+    Returns:
+        Tensor: int64. Shape (K, 3).
+    """
+    axes = [torch.arange(k, device=device) * s
+            for k, s in zip(kernel_size, step)]
+    return torch.stack(torch.meshgrid(*axes, indexing='ij'), -1).view(-1, 3)
+
+
+def _submanifold_rulebook_vectorised(coords: Tensor, spatial_shape: Triple,
+                                     kernel_size: Triple,
+                                     dilation: Triple) -> Rulebook:
+    """Rulebook of a submanifold convolution (outputs = input sites).
+
+    All K offsets at once: every site's K neighbour keys are looked up in
+    one ``searchsorted``; the pairs are split per offset by :func:`_hits`
+    (a fixed number of operations and two host syncs whatever K).
+
+    Args:
+        coords (Tensor): Unique sites ``(batch, z, y, x)``. Shape (N, 4).
+        spatial_shape (tuple[int]): Grid ``(Z, Y, X)``.
+        kernel_size (tuple[int]): Odd ``(k_z, k_y, k_x)``.
+        dilation (tuple[int]): Dilation per axis.
+
+    Returns:
+        Rulebook: ``center`` is the zero offset.
+    """
+    if any(k % 2 == 0 for k in kernel_size):
+        raise ValueError('submanifold conv needs an odd kernel_size so that '
+                         f'outputs stay on input sites, got {kernel_size}')
+    size_z, size_y, size_x = spatial_shape
+    zyx = coords[:, 1:].long()
+    keys = linearize(coords[:, 0], zyx, spatial_shape)
+    index = CoordIndex(keys)
+    rows = torch.arange(keys.numel(), device=keys.device)
+    half = zyx.new_tensor(
+        [(k // 2) * d for k, d in zip(kernel_size, dilation)])
+    shifts = _kernel_offsets(kernel_size, dilation, zyx.device) - half
+    center = (math.prod(kernel_size) - 1) // 2
+    neighbours = zyx.unsqueeze(0) + shifts.unsqueeze(1)  # (K, N, 3)
+    upper = zyx.new_tensor([size_z, size_y, size_x])
+    inside = ((neighbours >= 0) & (neighbours < upper)).all(dim=2)
+    # Keys of a shift that leaves the grid may alias other sites; those
+    # hits are masked by ``inside``.
+    shift_keys = (shifts[:, 0] * size_y + shifts[:, 1]) * size_x + \
+        shifts[:, 2]
+    found = index.query((keys.unsqueeze(0) +
+                         shift_keys.unsqueeze(1)).flatten()).view_as(inside)
+    hit = inside & (found >= 0)
+    # The centre pairs every site with itself: applied as one dense matmul.
+    hit[center] = False
+    offset, site, counts = _hits(hit)
+    in_indices = list(found[offset, site].split(counts))
+    out_indices = list(site.split(counts))
+    in_indices[center] = rows
+    out_indices[center] = rows
+    return Rulebook(in_indices, out_indices, coords, coords, spatial_shape,
+                    spatial_shape, kernel_size, subm=True, dilation=dilation,
+                    center=center)
+
+
+def _strided_rulebook_vectorised(coords: Tensor, spatial_shape: Triple,
+                                 kernel_size: Triple, stride: Triple,
+                                 padding: Triple,
+                                 dilation: Triple) -> Rulebook:
+    """Rulebook of a regular (possibly strided) sparse convolution.
+
+    An output site is active when any input falls inside its receptive
+    field; outputs are ordered by their linearised key. All K offsets at
+    once: per offset and input site, the output it reaches (if any), one
+    ``nonzero`` and one ``unique`` over all pairs.
+
+    Args:
+        coords (Tensor): Unique sites ``(batch, z, y, x)``. Shape (N, 4).
+        spatial_shape (tuple[int]): Input grid ``(Z, Y, X)``.
+        kernel_size (tuple[int]): ``(k_z, k_y, k_x)``.
+        stride (tuple[int]): Stride per axis.
+        padding (tuple[int]): Padding per axis.
+        dilation (tuple[int]): Dilation per axis.
+
+    Returns:
+        Rulebook: Output coords are int32. Shape (M, 4).
+    """
+    out_shape = conv_output_shape(spatial_shape, kernel_size, stride, padding,
+                                  dilation)
+    device = coords.device
+    batch = coords[:, 0].long()
+    # Solve q * stride = p + padding - k * dilation for q on every axis and
+    # offset: (K, N, 3).
+    numer = (coords[:, 1:].long() + coords.new_tensor(padding).long()
+             ).unsqueeze(0) - _kernel_offsets(kernel_size, dilation,
+                                              device).unsqueeze(1)
+    strides = numer.new_tensor(stride)
+    quotient = torch.div(numer, strides, rounding_mode='floor')
+    valid = ((numer >= 0) & (quotient * strides == numer) &
+             (quotient < numer.new_tensor(out_shape))).all(dim=2)
+    out_keys = ((batch.unsqueeze(0) * out_shape[0] + quotient[..., 0]) *
+                out_shape[1] + quotient[..., 1]) * out_shape[2] + \
+        quotient[..., 2]
+    offset, site, counts = _hits(valid)
+    in_indices = list(site.split(counts))
+    unique_keys, inverse = torch.unique(out_keys[offset, site],
+                                        return_inverse=True)
+    out_indices = list(inverse.split(counts))
+    out_coords = delinearize(unique_keys, out_shape)
+    return Rulebook(in_indices, out_indices, coords, out_coords, spatial_shape,
+                    out_shape, kernel_size, subm=False, dilation=dilation)
+
+
 def _inside(values: Tensor, size: int) -> Tensor:
     """Mask of ``0 <= values < size``."""
     return (values >= 0) & (values < size)
 
 
-def submanifold_rulebook(coords: Tensor, spatial_shape: Triple,
-                         kernel_size: Triple, dilation: Triple) -> Rulebook:
+def _submanifold_rulebook_loop(coords: Tensor, spatial_shape: Triple,
+                               kernel_size: Triple,
+                               dilation: Triple) -> Rulebook:
     """Rulebook of a submanifold convolution (outputs = input sites).
 
     Args:
@@ -281,9 +460,10 @@ def submanifold_rulebook(coords: Tensor, spatial_shape: Triple,
                     center=center)
 
 
-def strided_rulebook(coords: Tensor, spatial_shape: Triple,
-                     kernel_size: Triple, stride: Triple, padding: Triple,
-                     dilation: Triple) -> Rulebook:
+def _strided_rulebook_loop(coords: Tensor, spatial_shape: Triple,
+                           kernel_size: Triple, stride: Triple,
+                           padding: Triple,
+                           dilation: Triple) -> Rulebook:
     """Rulebook of a regular (possibly strided) sparse convolution.
 
     An output site is active when any input falls inside its receptive
@@ -330,3 +510,59 @@ def strided_rulebook(coords: Tensor, spatial_shape: Triple,
     out_coords = delinearize(unique_keys, out_shape)
     return Rulebook(in_indices, out_indices, coords, out_coords, spatial_shape,
                     out_shape, kernel_size, subm=False, dilation=dilation)
+
+
+def submanifold_rulebook(coords: Tensor, spatial_shape: Triple,
+                         kernel_size: Triple, dilation: Triple) -> Rulebook:
+    """Rulebook of a submanifold convolution (outputs = input sites).
+
+    On GPUs all offsets at once (:func:`_submanifold_rulebook_vectorised`:
+    a fixed number of launches, two host syncs); on the CPU the loop over
+    offset rows (:func:`_submanifold_rulebook_loop`), which searches 9
+    runs instead of 27 offsets and measured 13 against 22 ms for a 12,601
+    site 3x3x3 rulebook on one core. Both give the same pairs in the same
+    order (tests/occ_common/models/sparse/test_rulebook_vectorised.py).
+
+    Args:
+        coords (Tensor): Unique sites ``(batch, z, y, x)``. Shape (N, 4).
+        spatial_shape (tuple[int]): Grid ``(Z, Y, X)``.
+        kernel_size (tuple[int]): Odd ``(k_z, k_y, k_x)``.
+        dilation (tuple[int]): Dilation per axis.
+
+    Returns:
+        Rulebook: ``center`` is the zero offset.
+    """
+    if accelerator_path(coords):
+        return _submanifold_rulebook_vectorised(coords, spatial_shape,
+                                                kernel_size, dilation)
+    return _submanifold_rulebook_loop(coords, spatial_shape, kernel_size,
+                                      dilation)
+
+
+def strided_rulebook(coords: Tensor, spatial_shape: Triple,
+                     kernel_size: Triple, stride: Triple, padding: Triple,
+                     dilation: Triple) -> Rulebook:
+    """Rulebook of a regular (possibly strided) sparse convolution.
+
+    On GPUs all offsets at once (:func:`_strided_rulebook_vectorised`), on
+    the CPU the per-offset loop (:func:`_strided_rulebook_loop`; 6 against
+    20 ms for a 12,601-site 3x3x3 stride-2 rulebook on one core); the same
+    pairs and output sites.
+
+    Args:
+        coords (Tensor): Unique sites ``(batch, z, y, x)``. Shape (N, 4).
+        spatial_shape (tuple[int]): Input grid ``(Z, Y, X)``.
+        kernel_size (tuple[int]): ``(k_z, k_y, k_x)``.
+        stride (tuple[int]): Stride per axis.
+        padding (tuple[int]): Padding per axis.
+        dilation (tuple[int]): Dilation per axis.
+
+    Returns:
+        Rulebook: Output coords are int32. Shape (M, 4).
+    """
+    if accelerator_path(coords):
+        return _strided_rulebook_vectorised(coords, spatial_shape,
+                                            kernel_size, stride, padding,
+                                            dilation)
+    return _strided_rulebook_loop(coords, spatial_shape, kernel_size,
+                                  stride, padding, dilation)
