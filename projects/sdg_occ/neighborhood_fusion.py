@@ -18,6 +18,8 @@ from mmdet3d.registry import MODELS
 from mmengine.model import BaseModule
 from torch import Tensor, nn
 
+from projects.occ_common.utils.device_path import accelerator_path
+
 #: How a window meets the map border: ``'shift'`` moves it inside the map
 #: (NAT, Hassani et al., CVPR 2023, ref. [3] of SDG-OCC: every query sees
 #: k * k keys); ``'mask'`` keeps it centred and drops the cells outside.
@@ -253,7 +255,7 @@ def _attend_inner(query: Tensor, key: Tensor, value: Tensor,
     out_h = query.shape[-2] - 2 * reach
     row_bytes = key[..., 0, :].numel() * key.element_size()
     rows = max(1, BLOCK_BYTES // max(row_bytes, 1) - 2 * reach)
-    if rows >= out_h or query.device.type != 'cpu':
+    if rows >= out_h or accelerator_path(query):
         return _attend_inner_block(query, key, value, rel_bias, kernel_size)
     return torch.cat([
         _attend_inner_block(

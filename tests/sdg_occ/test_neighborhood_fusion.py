@@ -268,15 +268,15 @@ def test_gathered_border_matches_the_strips_it_replaces(border):
         assert torch.allclose(got, want, atol=1e-5)
 
 
-def test_launches_do_not_grow_with_the_batch(monkeypatch):
+def test_launches_do_not_grow_with_the_batch():
     """Off the CPU's row blocks (what a GPU runs), the attention's
     operator count is the same at batch 1 and batch 4: the border cells
     are one gather, the interior one pass of k * k slots, and no call
     after the first (which builds the border indices of the map shape)
-    waits for the device. Counted with the CPU's blocking off: the block
-    decision is the only device-dependent step."""
+    waits for the device. Counted on the path a GPU takes (no row
+    blocks), forced on the CPU."""
+    from projects.occ_common.utils.device_path import forced_accelerator_path
     from projects.occ_common.utils.op_counting import OpCounter
-    monkeypatch.setattr(nf, 'BLOCK_BYTES', 1 << 40)  # one block, as a GPU
     counts = []
     for batch in (1, 4):
         module = NeighborhoodFusion(8, 8, 8, embed_dims=8, num_heads=2)
@@ -284,7 +284,7 @@ def test_launches_do_not_grow_with_the_batch(monkeypatch):
         with torch.no_grad():
             module(source, cross)  # the border indices, once per shape
         counter = OpCounter(torch.nn.Sequential(module))
-        with torch.no_grad(), counter:
+        with torch.no_grad(), forced_accelerator_path(), counter:
             module(source, cross)
         counts.append(counter.totals())
     assert counts[0] == counts[1]

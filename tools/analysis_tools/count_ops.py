@@ -2,14 +2,17 @@
 step, per top-level module, at a config's input size.
 
 Runs on any device (the CPU counts what a GPU would launch: see
-:mod:`projects.occ_common.utils.op_counting`): builds the config's model,
+:mod:`projects.occ_common.utils.op_counting`; where the CPU and GPUs take
+different code paths, the GPU's is counted unless ``--cpu-path``, see
+:mod:`projects.occ_common.utils.device_path`): builds the config's model,
 runs one warm-up call (caches fill, as in a long run), then one counted
 prediction (``test_step``) or training step (``train_step`` with the
 config's optimiser: forward, backward and the step) on the benchmark's
 synthetic batch, for each ``--batch`` size::
 
     python tools/analysis_tools/count_ops.py CONFIG [--train] [--batch 1 2] \\
-        [--num-points N] [--device cpu] [--json OUT] [--cfg-options ...]
+        [--num-points N] [--device cpu] [--cpu-path] [--json OUT] \\
+        [--cfg-options ...]
 """
 import argparse
 import copy
@@ -22,6 +25,7 @@ from mmengine.config import DictAction
 from projects.occ_common.testing.synthetic_batch import synthetic_batch
 from projects.occ_common.utils.config_checks import (cfg_errors_exit,
                                                      merge_cfg_options)
+from projects.occ_common.utils.device_path import forced_accelerator_path
 from projects.occ_common.utils.op_counting import OpCounter
 
 
@@ -40,6 +44,10 @@ def parse_args(argv=None):
                         'per merged sweep of the config)')
     parser.add_argument('--device', default='cpu',
                         help='where the counted call runs (default cpu)')
+    parser.add_argument('--cpu-path', action='store_true',
+                        help='count the CPU\'s code path where it differs '
+                        '(row blocks, rulebook loops); by default the path '
+                        'a GPU takes is counted, on any device')
     parser.add_argument('--json', help='also write the counts here')
     parser.add_argument('--cfg-options', nargs='+', action=DictAction,
                         help='overrides, key=value')
@@ -74,6 +82,16 @@ def count_call(model, cfg, batch: dict, train: bool) -> OpCounter:
     return counter
 
 
+def count(model, cfg, batch: dict, train: bool,
+          cpu_path: bool) -> OpCounter:
+    """:func:`count_call` on the GPU's code path unless ``cpu_path``
+    (:mod:`projects.occ_common.utils.device_path`)."""
+    if cpu_path:
+        return count_call(model, cfg, batch, train)
+    with forced_accelerator_path():
+        return count_call(model, cfg, batch, train)
+
+
 def format_rows(rows: List[Dict]) -> str:
     """The per-(module, phase) table."""
     lines = [f'{"module":28s} {"phase":9s} {"launches":>9s} {"syncs":>6s} '
@@ -99,11 +117,12 @@ def main(argv=None) -> Dict:
     torch.manual_seed(0)
     model = MODELS.build(cfg.model).to(device)
     report = dict(config=args.config, mode='train' if args.train else
-                  'predict', device=str(device), batches={})
+                  'predict', device=str(device),
+                  path='cpu' if args.cpu_path else 'gpu', batches={})
     for size in args.batch:
         batch, described = synthetic_batch(cfg, size, args.num_points,
                                            labels=args.train)
-        counter = count_call(model, cfg, batch, args.train)
+        counter = count(model, cfg, batch, args.train, args.cpu_path)
         rows, totals = counter.table(), counter.totals()
         report['batches'][size] = dict(input=described, totals=totals,
                                        rows=rows)

@@ -57,7 +57,7 @@ NO_KERNEL_OPS = frozenset({
 SYNC_OPS = frozenset({
     'nonzero', 'masked_select', 'unique', '_unique', '_unique2',
     'unique_consecutive', 'unique_dim', 'equal', 'bincount',
-    'repeat_interleave', 'nonzero_static_host'
+    'repeat_interleave'  # unless output_size is given
 })
 #: Device reads that launch nothing themselves: counted as a sync only.
 SYNC_ONLY_OPS = frozenset({'_local_scalar_dense'})
@@ -109,7 +109,7 @@ class _DispatchCounter(TorchDispatchMode):
         self.owner = owner
 
     def __torch_dispatch__(self, func, types, args=(), kwargs=None):
-        self.owner.record(func, args)
+        self.owner.record(func, args, kwargs or {})
         return func(*args, **(kwargs or {}))
 
 
@@ -171,9 +171,14 @@ class OpCounter:
         if op is not None:
             entry.ops[op] += 1
 
-    def record(self, func, args) -> None:
+    def record(self, func, args, kwargs=None) -> None:
         """Classify one dispatched operator."""
         name = _op_name(func)
+        if name == 'repeat_interleave' and (kwargs or {}).get(
+                'output_size') is not None:
+            # The output size given: nothing for the host to wait for.
+            self.count(launches=1, op=name)
+            return
         if name in HOST_DATA_OPS:
             self.count(host_data=1, op=name)
         elif name in SYNC_ONLY_OPS:

@@ -70,3 +70,22 @@ def test_host_data_and_hooks_removed():
     model(torch.zeros(2))
     assert counter.totals() == before
     assert not model[0]._forward_hooks and not model[0]._forward_pre_hooks
+
+
+def test_repeat_interleave_syncs_only_without_output_size():
+    """Its output size is the sum of the repeats: the host must read them
+    unless ``output_size`` says it. Each call is two operators (the
+    indices from the repeats, then an index_select): 4 launches, 1 sync."""
+    repeats, x = torch.tensor([1, 2]), torch.tensor([5, 6])
+
+    class _Repeat(nn.Module):
+
+        def forward(self, x):
+            x.repeat_interleave(repeats)
+            return x.repeat_interleave(repeats, output_size=3)
+
+    model = nn.Sequential(_Repeat())
+    counter = OpCounter(model)
+    with counter:
+        model(x)
+    assert counter.totals() == dict(launches=4, syncs=1, host_data=0)

@@ -4,6 +4,7 @@ from mmdet.models.backbones import SwinTransformer
 from torch import Tensor
 
 from ..layers.checkpointing import checkpoint_if_grad
+from .cached_shift_mask import cache_shift_masks
 from .recomputed_blocks import RecomputedBlocks
 
 
@@ -23,9 +24,17 @@ class RecomputedSwinTransformer(RecomputedBlocks, SwinTransformer):
     (non-reentrant, random state restored, so the drop-path masks are the
     same), whenever the block or its input needs a gradient.
 
+    Its shifted-window attention builds each shift mask once per map
+    shape (:class:`.CachedMaskShiftWindowMSA`) instead of in every block's
+    forward and recomputation.
+
     Args: those of ``mmdet.SwinTransformer`` (``with_cp``: see
     :class:`.RecomputedBlocks`).
     """
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        cache_shift_masks(self)
 
     def forward(self, x: Tensor) -> list:
         """Patch embedding, then the stages block by block (as
