@@ -310,14 +310,7 @@ def _submanifold_rulebook_vectorised(coords: Tensor, spatial_shape: Triple,
     one ``searchsorted``; the pairs are split per offset by :func:`_hits`
     (a fixed number of operations and two host syncs whatever K).
 
-    Args:
-        coords (Tensor): Unique sites ``(batch, z, y, x)``. Shape (N, 4).
-        spatial_shape (tuple[int]): Grid ``(Z, Y, X)``.
-        kernel_size (tuple[int]): Odd ``(k_z, k_y, k_x)``.
-        dilation (tuple[int]): Dilation per axis.
-
-    Returns:
-        Rulebook: ``center`` is the zero offset.
+    Arguments and result: those of :func:`submanifold_rulebook`.
     """
     if any(k % 2 == 0 for k in kernel_size):
         raise ValueError('submanifold conv needs an odd kernel_size so that '
@@ -364,16 +357,7 @@ def _strided_rulebook_vectorised(coords: Tensor, spatial_shape: Triple,
     once: per offset and input site, the output it reaches (if any), one
     ``nonzero`` and one ``unique`` over all pairs.
 
-    Args:
-        coords (Tensor): Unique sites ``(batch, z, y, x)``. Shape (N, 4).
-        spatial_shape (tuple[int]): Input grid ``(Z, Y, X)``.
-        kernel_size (tuple[int]): ``(k_z, k_y, k_x)``.
-        stride (tuple[int]): Stride per axis.
-        padding (tuple[int]): Padding per axis.
-        dilation (tuple[int]): Dilation per axis.
-
-    Returns:
-        Rulebook: Output coords are int32. Shape (M, 4).
+    Arguments and result: those of :func:`strided_rulebook`.
     """
     out_shape = conv_output_shape(spatial_shape, kernel_size, stride, padding,
                                   dilation)
@@ -411,14 +395,7 @@ def _submanifold_rulebook_loop(coords: Tensor, spatial_shape: Triple,
                                dilation: Triple) -> Rulebook:
     """Rulebook of a submanifold convolution (outputs = input sites).
 
-    Args:
-        coords (Tensor): Unique sites ``(batch, z, y, x)``. Shape (N, 4).
-        spatial_shape (tuple[int]): Grid ``(Z, Y, X)``.
-        kernel_size (tuple[int]): Odd ``(k_z, k_y, k_x)``.
-        dilation (tuple[int]): Dilation per axis.
-
-    Returns:
-        Rulebook: ``center`` is the zero offset.
+    Arguments and result: those of :func:`submanifold_rulebook`.
     """
     if any(k % 2 == 0 for k in kernel_size):
         raise ValueError('submanifold conv needs an odd kernel_size so that '
@@ -469,16 +446,7 @@ def _strided_rulebook_loop(coords: Tensor, spatial_shape: Triple,
     An output site is active when any input falls inside its receptive
     field; outputs are ordered by their linearised key.
 
-    Args:
-        coords (Tensor): Unique sites ``(batch, z, y, x)``. Shape (N, 4).
-        spatial_shape (tuple[int]): Input grid ``(Z, Y, X)``.
-        kernel_size (tuple[int]): ``(k_z, k_y, k_x)``.
-        stride (tuple[int]): Stride per axis.
-        padding (tuple[int]): Padding per axis.
-        dilation (tuple[int]): Dilation per axis.
-
-    Returns:
-        Rulebook: Output coords are int32. Shape (M, 4).
+    Arguments and result: those of :func:`strided_rulebook`.
     """
     out_shape = conv_output_shape(spatial_shape, kernel_size, stride, padding,
                                   dilation)
