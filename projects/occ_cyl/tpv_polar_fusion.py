@@ -4,7 +4,7 @@ Implements step 5 of OccCylindrical: eqs. 6-7 (cylindrical partition and
 per-voxel max pooling), eqs. 8-13 (spatial group pooling) and the 2D dynamic
 fusion of each camera plane with its LiDAR plane.
 """
-from typing import List, Tuple
+from typing import List, Optional, Tuple
 
 import torch
 from mmdet3d.registry import MODELS
@@ -13,10 +13,14 @@ from mmengine.model import BaseModule
 from torch import Tensor, nn
 
 from projects.occ_common.models.layers import cartesian_to_cylindrical
+from projects.occ_common.utils.device_path import chunk_items
 from .cylindrical import CylinderGrid
 from .dynamic_fusion import DynamicFusion2D
 from .group_pooling import SpatialGroupPooling
 from .lift_pool import lift_max_pool, voxel_max_pool
+
+#: Points per chunk of the fused lift on the CPU (its cache).
+CPU_LIFT_CHUNK = 16384
 
 
 @MODELS.register_module()
@@ -48,8 +52,11 @@ class TPVPolarFusion(BaseModule):
         with_lidar (bool): Use the LiDAR cloud. Defaults to True.
         fused_lift (bool): Fused lift-pool (True) or the naive reference.
             Defaults to True.
-        lift_chunk_size (int): Points per chunk of the fused lift.
-            Defaults to 16384.
+        lift_chunk_size (int, optional): Points per chunk of the fused
+            lift. Defaults to None: 16,384 on the CPU (its cache), on a GPU
+            as many as a quarter of the free memory holds at 16 bytes per
+            point-channel (one or two chunks at paper size instead of
+            ~100; :func:`~projects.occ_common.utils.device_path.chunk_items`).
         norm_cfg (dict): Normalisation of the MLPs and fusion.
             Defaults to BN2d.
         with_cp (bool): Recompute the group pooling in the backward
@@ -66,7 +73,7 @@ class TPVPolarFusion(BaseModule):
                  with_camera: bool = True,
                  with_lidar: bool = True,
                  fused_lift: bool = True,
-                 lift_chunk_size: int = 16384,
+                 lift_chunk_size: Optional[int] = None,
                  norm_cfg: ConfigType = dict(type='BN2d'),
                  with_cp: bool = False,
                  init_cfg: OptMultiConfig = None) -> None:
@@ -129,7 +136,8 @@ class TPVPolarFusion(BaseModule):
             rows.flatten(0, 1),
             voxels.numel(),
             fused=self.fused_lift,
-            chunk_size=self.lift_chunk_size)
+            chunk_size=self.lift_chunk_size or chunk_items(
+                context, 16 * context.shape[1], CPU_LIFT_CHUNK))
         return pooled, voxels
 
     def lidar_voxels(self, feats: List[Tensor],
