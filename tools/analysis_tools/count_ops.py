@@ -57,12 +57,24 @@ def parse_args(argv=None):
     return args
 
 
-def count_call(model, cfg, batch: dict, train: bool) -> OpCounter:
-    """One warm-up call, then one counted call of the same batch."""
+def count_call(model, cfg, batch: dict, train: bool,
+               foreach: bool = False) -> OpCounter:
+    """One warm-up call, then one counted call of the same batch.
+
+    ``foreach``: the optimiser and the gradient clipping use torch's
+    multi-tensor (foreach) kernels, what torch picks by default for CUDA
+    parameters; on CPU parameters it picks one kernel per tensor (and an
+    ``.item()`` of each step count), which a GPU never runs.
+    """
     optim_wrapper = None
     if train:
         from mmengine.optim import build_optim_wrapper
-        optim_wrapper = build_optim_wrapper(model, cfg.optim_wrapper)
+        optim_cfg = copy.deepcopy(cfg.optim_wrapper)
+        if foreach:
+            optim_cfg.optimizer.setdefault('foreach', True)
+            if optim_cfg.get('clip_grad'):
+                optim_cfg.clip_grad.setdefault('foreach', True)
+        optim_wrapper = build_optim_wrapper(model, optim_cfg)
         model.train()
     else:
         model.eval()
@@ -77,6 +89,14 @@ def count_call(model, cfg, batch: dict, train: bool) -> OpCounter:
 
     call()
     counter = OpCounter(model)
+    if optim_wrapper is not None:
+        step = optim_wrapper.optimizer.step
+
+        def counted_step(*args, **kwargs):
+            with counter.optimizer_step():
+                return step(*args, **kwargs)
+
+        optim_wrapper.optimizer.step = counted_step
     with counter:
         call()
     return counter
@@ -89,7 +109,7 @@ def count(model, cfg, batch: dict, train: bool,
     if cpu_path:
         return count_call(model, cfg, batch, train)
     with forced_accelerator_path():
-        return count_call(model, cfg, batch, train)
+        return count_call(model, cfg, batch, train, foreach=True)
 
 
 def format_rows(rows: List[Dict]) -> str:

@@ -20,7 +20,8 @@ optimiser step):
   run (``torch._C._current_autograd_node``), found by walking each
   module's outputs' graph back to the nodes an earlier module created;
   nodes created during a recomputation in the backward take the module of
-  the last attributed node.
+  the last attributed node;
+* ``(optimizer)``: inside :meth:`OpCounter.optimizer_step`.
 
 Counted as launches: every operator but those of :data:`NO_KERNEL_OPS`
 (views, metadata, allocations) and of :data:`SYNC_ONLY_OPS` (a device
@@ -30,8 +31,9 @@ Python-level reads of :data:`SYNC_METHODS`. ``lift_fresh`` (a tensor made
 from host data, e.g. ``torch.tensor([...])``) is counted as ``host_data``:
 on a GPU it is followed by a host-to-device copy.
 """
+import contextlib
 from collections import defaultdict
-from typing import Dict, Iterable, List, Optional
+from typing import Dict, Iterable, Iterator, List, Optional
 
 import torch
 from torch import nn
@@ -51,7 +53,8 @@ NO_KERNEL_OPS = frozenset({
     '_has_compatible_shallow_copy_type', 'sym_size', 'sym_stride',
     'sym_numel', 'sym_storage_offset', 'is_contiguous', 'dim', 'size',
     'stride', 'numel', 'storage_offset', 'output_nr', '_version',
-    'is_nonzero', 'prim_layout', 'prim_device'
+    'is_nonzero', 'prim_layout', 'prim_device', '_record_function_enter',
+    '_record_function_enter_new', '_record_function_exit'
 })
 #: Operators whose result the host must wait for (and that also launch).
 SYNC_OPS = frozenset({
@@ -147,9 +150,24 @@ class OpCounter:
         self._last_backward = '(model)'
         self._hooks: list = []
         self._modes: list = []
+        self._marked: Optional[str] = None
+
+    @contextlib.contextmanager
+    def optimizer_step(self) -> Iterator[None]:
+        """Attribute what runs inside to ``(optimizer)``, where reading a
+        0-dim tensor is not a sync: torch optimisers keep their step
+        counts on the host for CUDA parameters (unless ``capturable`` or
+        ``fused``), so those reads never wait for the device."""
+        before, self._marked = self._marked, '(optimizer)'
+        try:
+            yield
+        finally:
+            self._marked = before
 
     # -- attribution ---------------------------------------------------
     def _phase_module(self):
+        if self._marked is not None:
+            return self._marked, 'optimizer'
         node = torch._C._current_autograd_node()
         if node is not None:
             module = self._node_module.get(node)
@@ -182,7 +200,13 @@ class OpCounter:
         if name in HOST_DATA_OPS:
             self.count(host_data=1, op=name)
         elif name in SYNC_ONLY_OPS:
-            self.count(syncs=1, op=name)
+            host_scalar = (self._marked is not None and args
+                           and isinstance(args[0], torch.Tensor)
+                           and args[0].dim() == 0)
+            if host_scalar:
+                self.count(op='host step count read')
+            else:
+                self.count(syncs=1, op=name)
         elif name in NO_KERNEL_OPS:
             return
         elif name in SYNC_OPS or (name in ('index', 'index_put', 'index_put_')

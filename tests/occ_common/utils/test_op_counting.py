@@ -89,3 +89,24 @@ def test_repeat_interleave_syncs_only_without_output_size():
     with counter:
         model(x)
     assert counter.totals() == dict(launches=4, syncs=1, host_data=0)
+
+
+def test_optimizer_step_counts_reads_no_sync():
+    """AdamW (foreach, as torch picks for CUDA parameters) reads each
+    parameter's step count, a host tensor on a GPU: inside
+    ``optimizer_step`` those reads are no syncs; the same 0-dim read in
+    a forward is one."""
+    model = nn.Sequential(nn.Linear(2, 2))
+    model(torch.ones(1, 2)).sum().backward()
+    optimizer = torch.optim.AdamW(model.parameters(), foreach=True)
+    counter = OpCounter(model)
+    with counter:
+        with counter.optimizer_step():
+            optimizer.step()
+        model(torch.ones(1, 2)).sum().item()
+    rows = {(r['module'], r['phase']): r for r in counter.table()}
+    step = rows[('(optimizer)', 'optimizer')]
+    assert step['syncs'] == 0 and step['launches'] > 0
+    # Two reads (the two bias corrections) for each of weight and bias.
+    assert step['top_ops']['host step count read'] == 4
+    assert counter.totals()['syncs'] == 1  # the .item() after the model
