@@ -26,8 +26,7 @@ from mmengine.config import Config
 
 from projects.occ_common.testing.config_fingerprint import config_paths
 
-ROOT = osp.dirname(osp.abspath(__file__)) + '/..'
-ROOT = osp.normpath(ROOT)
+ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
 #: Configs of the papers' models and ablations (not the synthetic ones).
 PAPER_CONFIGS = [p for p in config_paths(ROOT) if 'synthetic' not in p]
 

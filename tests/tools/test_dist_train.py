@@ -7,23 +7,16 @@ tools/test.py on the same checkpoint, to the last digit of the json log.
 """
 import os
 import os.path as osp
-import socket
 import subprocess
 import sys
 
 import pytest
 
+from projects.occ_common.testing.ddp_check import free_port
 from projects.occ_common.testing.tool_logs import last_test_metrics
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ.py')
-
-
-def _free_port():
-    """A TCP port nobody listens on right now."""
-    with socket.socket() as sock:
-        sock.bind(('127.0.0.1', 0))
-        return sock.getsockname()[1]
 
 
 def _run(cmd, env=None):
@@ -61,7 +54,7 @@ def test_two_rank_train_then_gathered_metric_equals_single_process(
     proc = _run([
         'bash', osp.join(ROOT, 'tools', 'dist_train.sh'), CONFIG, '2',
         '--work-dir', work_dir, '--cfg-options', 'train_cfg.max_epochs=1'
-    ], env=dict(PORT=str(_free_port())))
+    ], env=dict(PORT=str(free_port())))
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-4000:]
     output = proc.stdout + proc.stderr
     assert 'Epoch(train) [1][2/2]' in output
@@ -72,7 +65,7 @@ def test_two_rank_train_then_gathered_metric_equals_single_process(
     proc = _run([
         'bash', osp.join(ROOT, 'tools', 'dist_test.sh'), CONFIG, checkpoint,
         '2', '--work-dir', dist_dir
-    ], env=dict(PORT=str(_free_port())))
+    ], env=dict(PORT=str(free_port())))
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-4000:]
     assert 'Epoch(test) [1/1]' in proc.stdout + proc.stderr
 

@@ -44,6 +44,8 @@ import time
 import numpy as np
 import torch
 
+from projects.occ_common.utils.benchmarking import summarise
+
 REPO = osp.dirname(
     osp.dirname(osp.dirname(osp.abspath(__file__))))
 #: nuScenes sweeps a key frame has (mmdet3d's ``--max-sweeps``), and the
@@ -167,19 +169,14 @@ def loader_throughput(cfg, num_workers, num_samples):
 
 
 def step_times(dataset, num_samples):
-    """Mean seconds of every pipeline step in the main process, and the
-    source image size (H, W)."""
-    totals, source = {}, None
-    for idx in range(num_samples):
-        results = dataset.get_data_info(idx % len(dataset))
-        for transform in dataset.pipeline.transforms:
-            start = time.perf_counter()
-            results = transform(results)
-            name = type(transform).__name__
-            totals[name] = totals.get(name, 0.0) + time.perf_counter() - start
-            if isinstance(results, dict) and 'ori_shape' in results:
-                source = list(results['ori_shape'])
-    return {k: v / num_samples for k, v in totals.items()}, source
+    """Mean wall seconds of every pipeline step in the main process (from
+    :func:`time_samples`), and the source image size (H, W)."""
+    runs, results = time_samples(dataset, num_samples)
+    means = {
+        name: float(np.mean([run['steps'][name][0] for run in runs]))
+        for name in runs[0]['steps'] if name != 'get_data_info'
+    }
+    return means, list(results['data_samples'].metainfo['ori_shape'])
 
 
 def compare_sweeps(dataset, repeats):
@@ -276,7 +273,8 @@ def make_real_root(sample_dir, root):
 
 
 def time_samples(dataset, num_samples):
-    """Wall and process CPU seconds of sample 0's pipeline, step by step.
+    """Wall and process CPU seconds of the pipeline, step by step, over
+    samples 0, 1, ... (cycling).
 
     Args:
         dataset (BaseDataset): The dataset.
@@ -288,10 +286,10 @@ def time_samples(dataset, num_samples):
         copy), and the last run's output.
     """
     runs, results = [], None
-    for _ in range(num_samples):
+    for index in range(num_samples):
         steps = {}
         start = last = (time.perf_counter(), time.process_time())
-        results = dataset.get_data_info(0)
+        results = dataset.get_data_info(index % len(dataset))
         for transform in [None] + list(dataset.pipeline.transforms):
             if transform is not None:
                 results = transform(results)
@@ -305,15 +303,6 @@ def time_samples(dataset, num_samples):
             dict(wall=last[0] - start[0], cpu=last[1] - start[1],
                  steps=steps))
     return runs, results
-
-
-def summary(values):
-    """Median, min, max and the values themselves."""
-    return dict(
-        median=float(np.median(values)),
-        min=float(np.min(values)),
-        max=float(np.max(values)),
-        runs=[float(v) for v in values])
 
 
 @contextlib.contextmanager
@@ -421,8 +410,8 @@ def real_sample_report(args):
                                cpu_s=float(np.mean(cpus)))
         report['configs'][path].update(
             samples=len(flat),
-            wall_s=summary([run['wall'] for run in flat]),
-            cpu_s=summary([run['cpu'] for run in flat]),
+            wall_s=summarise([run['wall'] for run in flat]),
+            cpu_s=summarise([run['cpu'] for run in flat]),
             round_median_wall_s=[
                 float(np.median([run['wall'] for run in round_]))
                 for round_ in rounds
