@@ -40,3 +40,13 @@ def world_copy(converted_tiny_world, tmp_path):
     copy = str(tmp_path / 'world')
     shutil.copytree(converted_tiny_world, copy)
     return copy
+
+
+@pytest.fixture(params=['cpu path', 'gpu path'])
+def code_path(request):
+    """Run the test on the CPU's code path and again on the one GPUs take
+    (:mod:`projects.occ_common.utils.device_path`), on the CPU: values
+    worked out by hand must hold on both."""
+    from projects.occ_common.utils.device_path import forced_accelerator_path
+    with forced_accelerator_path(request.param == 'gpu path'):
+        yield request.param

@@ -17,6 +17,8 @@ from typing import Callable, NamedTuple, Optional, Sequence, Tuple
 import torch
 from torch import Tensor
 
+from projects.occ_common.utils.device_path import accelerator_path
+
 
 class BEVPoolIndices(NamedTuple):
     """Indices of the points that land inside the BEV grid.
@@ -26,9 +28,13 @@ class BEVPoolIndices(NamedTuple):
             vector. Shape (P,).
         feat_index (Tensor): Index of each kept point into the rows of the
             feature matrix. Shape (P,).
-        bev_index (Tensor): Flat cell index ``b * Y * X + y * X + x``,
-            sorted ascending so that a cell's points are contiguous (the
-            layout a segment-sum kernel needs). Shape (P,).
+        bev_index (Tensor): Flat cell index ``b * Y * X + y * X + x``, or
+            the drop cell ``B * Y * X`` for a point that is not pooled.
+            The CPU's path keeps only pooled points, sorted ascending so
+            that a cell's points are contiguous (the layout a segment-sum
+            kernel needs); the GPUs' keeps every point in its input order
+            and marks the dropped ones, because compacting would read the
+            kept count on the host (a sync). Shape (P,).
         batch_size (int): Number B of BEV maps.
         bev_shape (tuple[int, int]): (Y, X).
     """
@@ -38,11 +44,29 @@ class BEVPoolIndices(NamedTuple):
     batch_size: int
     bev_shape: Tuple[int, int]
 
+    @property
+    def drop_cell(self) -> int:
+        """int: ``B * Y * X``, the cell of the points not pooled."""
+        return self.batch_size * self.bev_shape[0] * self.bev_shape[1]
+
     def select(self, keep: Tensor) -> 'BEVPoolIndices':
-        """Indices restricted to the points where ``keep`` (P,) is true."""
+        """Indices restricted to the points where ``keep`` (P,) is true.
+
+        The CPU's path drops the other points; the GPUs' moves them to the
+        drop cell (no sync).
+        """
+        if accelerator_path(keep):
+            return self._replace(bev_index=torch.where(
+                keep, self.bev_index,
+                torch.full_like(self.bev_index, self.drop_cell)))
         return BEVPoolIndices(self.weight_index[keep], self.feat_index[keep],
                               self.bev_index[keep], self.batch_size,
                               self.bev_shape)
+
+    def num_pooled(self) -> Tensor:
+        """Number of pooled points, a long scalar on the indices' device
+        (no host read)."""
+        return (self.bev_index < self.drop_cell).sum()
 
 
 def bev_cell_size(point_cloud_range: Sequence[float],
@@ -61,8 +85,8 @@ def bev_pool_indices(coords: Tensor, batch_index: Tensor,
                      feat_index: Tensor, batch_size: int,
                      point_cloud_range: Sequence[float],
                      bev_shape: Sequence[int],
-                     weight_index: Optional[Tensor] = None
-                     ) -> BEVPoolIndices:
+                     weight_index: Optional[Tensor] = None,
+                     valid: Optional[Tensor] = None) -> BEVPoolIndices:
     """Compute the pooling indices of a set of lifted points.
 
     Args:
@@ -75,9 +99,14 @@ def bev_pool_indices(coords: Tensor, batch_index: Tensor,
         bev_shape (Sequence[int]): (Y, X).
         weight_index (Tensor, optional): Weight of each point; defaults to
             the point's position 0 .. P - 1. Shape (P,).
+        valid (Tensor, optional): bool, False drops the point whatever its
+            position. Defaults to None (every point may be pooled).
+            Shape (P,).
 
     Returns:
-        BEVPoolIndices: Indices of the kept points, sorted by cell.
+        BEVPoolIndices: Indices of the kept points, sorted by cell (the
+        CPU's path), or of every point with the dropped ones in the drop
+        cell (the GPUs', no host sync): pooled alike by :func:`bev_pool`.
     """
     if coords.dim() != 2 or coords.shape[1] != 3:
         raise ValueError('coords must have shape (P, 3), got '
@@ -93,12 +122,22 @@ def bev_pool_indices(coords: Tensor, batch_index: Tensor,
     size_x, size_y = bev_cell_size(point_cloud_range, bev_shape)
     xmin, ymin, zmin, _, _, zmax = (float(v) for v in point_cloud_range)
     num_y, num_x = int(bev_shape[0]), int(bev_shape[1])
-    ix = torch.floor((coords[:, 0] - xmin) / size_x).long()
-    iy = torch.floor((coords[:, 1] - ymin) / size_y).long()
-    keep = ((ix >= 0) & (ix < num_x) & (iy >= 0) & (iy < num_y)
-            & (coords[:, 2] >= zmin) & (coords[:, 2] < zmax)
-            & (batch_index >= 0) & (batch_index < batch_size))
+    # Cells (x, y) of both axes at once: a GPU launches per operation.
+    cell = torch.floor((coords[:, :2] - coords.new_tensor([xmin, ymin])) /
+                       coords.new_tensor([size_x, size_y])).long()
+    keep = ((cell >= 0) & (cell < cell.new_tensor([num_x, num_y]))).all(1)
+    ix, iy = cell.unbind(1)
+    keep &= ((coords[:, 2] >= zmin) & (coords[:, 2] < zmax)
+             & (batch_index >= 0) & (batch_index < batch_size))
+    if valid is not None:
+        keep = keep & valid
     rank = (batch_index.long() * num_y + iy) * num_x + ix
+    if accelerator_path(coords):
+        # No compaction, no sort: index_add needs neither.
+        rank = torch.where(keep, rank,
+                           torch.full_like(rank, batch_size * num_y * num_x))
+        return BEVPoolIndices(weight_index.long(), feat_index.long(), rank,
+                              int(batch_size), (num_y, num_x))
     rank = rank[keep]
     rank, order = torch.sort(rank, stable=True)
     kept = torch.nonzero(keep, as_tuple=False).squeeze(1)[order]
@@ -124,13 +163,14 @@ def bev_pool(feats: Tensor, weights: Tensor,
                          f'got {tuple(feats.shape)} and '
                          f'{tuple(weights.shape)}')
     num_y, num_x = indices.bev_shape
-    num_cells = indices.batch_size * num_y * num_x
+    num_cells = indices.drop_cell
     contrib = feats[indices.feat_index] * weights[indices.weight_index,
                                                   None].to(feats.dtype)
-    out = feats.new_zeros(num_cells, feats.shape[1])
+    # One row more: the drop cell's, cut off below.
+    out = feats.new_zeros(num_cells + 1, feats.shape[1])
     out = out.index_add(0, indices.bev_index, contrib)
-    return out.view(indices.batch_size, num_y, num_x,
-                    -1).permute(0, 3, 1, 2).contiguous()
+    return out[:num_cells].view(indices.batch_size, num_y, num_x,
+                                -1).permute(0, 3, 1, 2).contiguous()
 
 
 def bev_pool_mask(indices: BEVPoolIndices) -> Tensor:
@@ -144,11 +184,11 @@ def bev_pool_mask(indices: BEVPoolIndices) -> Tensor:
     """
     num_y, num_x = indices.bev_shape
     mask = torch.zeros(
-        indices.batch_size * num_y * num_x,
+        indices.drop_cell + 1,
         dtype=torch.bool,
         device=indices.bev_index.device)
     mask[indices.bev_index] = True
-    return mask.view(indices.batch_size, 1, num_y, num_x)
+    return mask[:-1].view(indices.batch_size, 1, num_y, num_x)
 
 
 class BEVPoolIndexCache:

@@ -20,7 +20,8 @@ from torch import Tensor
 from projects.occ_common.geometry.depth import (nearest_depth_map,
                                                 num_depth_bins)
 from projects.occ_common.models.layers.camera_geometry import (
-    create_frustum, frustum_to_lidar)
+    device_frustum, frustum_to_lidar)
+from projects.occ_common.utils.device_path import accelerator_path
 from .bev_pool import (BEVPoolIndexCache, BEVPoolIndices, bev_pool,
                        bev_pool_indices, bev_pool_mask)
 from .semantic_diffusion import semantic_depth_diffusion
@@ -29,10 +30,10 @@ from .virtual_points import bilinear_incremental_discretization
 _FALLBACKS = ('lss', 'none')
 
 
-def key_frame_points(points: Sequence[Tensor],
-                     time_dims: Optional[Sequence[Optional[int]]] = None
-                     ) -> List[Tensor]:
-    """The key-frame points of every sample (time lag 0).
+def key_frame_masks(points: Sequence[Tensor],
+                    time_dims: Optional[Sequence[Optional[int]]] = None
+                    ) -> List[Optional[Tensor]]:
+    """Which points of every sample are key-frame points (time lag 0).
 
     Merged sweeps smear moving objects (a car now at 20 m whose return
     0.45 s earlier was 4.5 m nearer), so the guidance depth maps use the
@@ -49,25 +50,48 @@ def key_frame_points(points: Sequence[Tensor],
             merged. Defaults to None (no sample has one).
 
     Returns:
-        list[Tensor]: Per sample, the rows with time lag 0.
+        list[Tensor | None]: Per sample, a bool mask (P_b,), or None where
+        every point is a key-frame point.
     """
     if time_dims is None:
-        return list(points)
+        return [None] * len(points)
     if len(time_dims) != len(points):
         raise ValueError(f'key_frame_points got {len(time_dims)} time '
                          f'columns for {len(points)} point clouds')
-    out = []
+    masks = []
     for b, (pts, dim) in enumerate(zip(points, time_dims)):
         if dim is not None and not 0 <= dim < pts.shape[1]:
             raise ValueError(f'points of sample {b} have {pts.shape[1]} '
                              f'columns, no time column {dim}')
-        out.append(pts if dim is None else pts[pts[:, dim] == 0])
-    return out
+        masks.append(None if dim is None else pts[:, dim] == 0)
+    return masks
 
 
-def points_to_depth_maps(points: Sequence[Tensor], lidar2img: Tensor,
-                         img_shape: Sequence[int],
-                         feat_shape: Sequence[int]) -> Tensor:
+def key_frame_points(points: Sequence[Tensor],
+                     time_dims: Optional[Sequence[Optional[int]]] = None
+                     ) -> List[Tensor]:
+    """The key-frame points of every sample (:func:`key_frame_masks`).
+
+    Args:
+        points (Sequence[Tensor]): Per sample, Shape (P_b, C).
+        time_dims (Sequence[int | None], optional): As for
+            :func:`key_frame_masks`. Defaults to None.
+
+    Returns:
+        list[Tensor]: Per sample, the rows with time lag 0.
+    """
+    return [
+        pts if mask is None else pts[mask]
+        for pts, mask in zip(points, key_frame_masks(points, time_dims))
+    ]
+
+
+def points_to_depth_maps(
+        points: Sequence[Tensor],
+        lidar2img: Tensor,
+        img_shape: Sequence[int],
+        feat_shape: Sequence[int],
+        time_dims: Optional[Sequence[Optional[int]]] = None) -> Tensor:
     """Nearest LiDAR depth of every feature cell of every camera.
 
     :func:`~projects.occ_common.geometry.depth.nearest_depth_map` at
@@ -83,6 +107,9 @@ def points_to_depth_maps(points: Sequence[Tensor], lidar2img: Tensor,
             ``(u d, v d, d, 1)``. Shape (B, N, 4, 4).
         img_shape (Sequence[int]): Network input (H, W).
         feat_shape (Sequence[int]): Feature map (h, w).
+        time_dims (Sequence[int | None], optional): Per sample, the time
+            column; only key-frame points are projected
+            (:func:`key_frame_masks`). Defaults to None (all points).
 
     Returns:
         Tensor: Depth, 0 where no return. Shape (B * N, h, w).
@@ -96,8 +123,11 @@ def points_to_depth_maps(points: Sequence[Tensor], lidar2img: Tensor,
         if pts.dim() != 2 or pts.shape[1] < 3:
             raise ValueError(f'points of sample {b} must be (P, C >= 3), '
                              f'got {tuple(pts.shape)}')
+    for b, mask in enumerate(key_frame_masks(points, time_dims)):
         maps.append(
-            nearest_depth_map(pts, lidar2img[b], img_shape, feat_shape))
+            nearest_depth_map(
+                points[b], lidar2img[b], img_shape, feat_shape,
+                point_mask=mask))
     return torch.cat(maps, dim=0)
 
 
@@ -166,7 +196,8 @@ class SDGViewTransform(BaseModule):
         feat_h, feat_w = (int(v) for v in feat_shape)
 
         def compute() -> BEVPoolIndices:
-            frustum = create_frustum(img_shape, feat_shape, self.depth_bound)
+            frustum = device_frustum(img_shape, feat_shape,
+                                     self.depth_bound, lidar2img.device)
             coords = frustum_to_lidar(frustum, lidar2img).reshape(-1, 3)
             device = lidar2img.device
             cam = torch.arange(batch * num_cams, device=device)
@@ -179,6 +210,11 @@ class SDGViewTransform(BaseModule):
             return bev_pool_indices(coords, batch_index, feat_index, batch,
                                     self.point_cloud_range, self.bev_shape)
 
+        if accelerator_path(lidar2img):
+            # Comparing the geometry with the cached one reads a device
+            # value (torch.equal, a sync); the indices cost a few dozen
+            # launches and no sync to recompute.
+            return compute()
         key = (lidar2img, tuple(int(v) for v in img_shape), (feat_h, feat_w))
         return self.lss_cache.get(key, compute)
 
@@ -187,7 +223,15 @@ class SDGViewTransform(BaseModule):
         """Indices of the valid virtual points (depths (M, L, h, w))."""
         num_m, num_l, feat_h, feat_w = depths.shape
         batch, num_cams = lidar2img.shape[:2]
-        flat = torch.nonzero(valid.reshape(-1), as_tuple=False).squeeze(1)
+        if accelerator_path(depths):
+            # Every virtual point, the invalid ones dropped by the pooling
+            # (no host read of their count).
+            flat = torch.arange(valid.numel(), device=valid.device)
+            keep = valid.reshape(-1)
+        else:
+            flat = torch.nonzero(valid.reshape(-1),
+                                 as_tuple=False).squeeze(1)
+            keep = None
         pix = flat % (feat_h * feat_w)
         cam = flat // (num_l * feat_h * feat_w)
         row, col = pix // feat_w, pix % feat_w
@@ -206,7 +250,8 @@ class SDGViewTransform(BaseModule):
             batch,
             self.point_cloud_range,
             self.bev_shape,
-            weight_index=flat)
+            weight_index=flat,
+            valid=keep)
 
     def forward(self, context: Tensor, depth_prob: Tensor,
                 seg_logits: Optional[Tensor],
@@ -271,8 +316,8 @@ class SDGViewTransform(BaseModule):
                                  'by LiDAR depth and needs the points')
             with torch.no_grad():
                 sparse = points_to_depth_maps(
-                    key_frame_points(points, points_time_dims),
-                    lidar2img.float(), img_shape, (feat_h, feat_w))
+                    points, lidar2img.float(), img_shape, (feat_h, feat_w),
+                    points_time_dims)
                 ext_depth = semantic_depth_diffusion(
                     sparse, seg_logits.argmax(dim=1), self.diffusion_radius)
             has_ext = ext_depth > 0
@@ -283,14 +328,14 @@ class SDGViewTransform(BaseModule):
             sdg = self._sdg_indices(depths, valid, lidar2img, img_shape)
             indices.append(sdg)
             weights.append(vp_weights.reshape(-1))
-            out['num_sdg_points'] = zero + sdg.bev_index.numel()
+            out['num_sdg_points'] = sdg.num_pooled()
 
         if self.fallback == 'lss':
             lss = self._lss_indices(lidar2img, img_shape, (feat_h, feat_w))
             lss = lss.select(~has_ext.reshape(-1)[lss.feat_index])
             indices.append(lss)
             weights.append(depth_prob.reshape(-1))
-            out['num_lss_points'] = zero + lss.bev_index.numel()
+            out['num_lss_points'] = lss.num_pooled()
 
         bev = context.new_zeros(batch, context.shape[1], *self.bev_shape)
         mask = torch.zeros(

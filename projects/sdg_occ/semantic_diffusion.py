@@ -7,9 +7,12 @@ class around it, so that the sparse LiDAR depth spreads along objects but
 never across a semantic boundary.
 """
 import math
+from typing import Tuple
 
 import torch
 from torch import Tensor
+
+from projects.occ_common.utils.device_path import accelerator_path
 
 
 def _disc_offsets(radius: float):
@@ -72,17 +75,68 @@ def semantic_depth_diffusion(depth: Tensor, seg: Tensor,
         torch.where(has_return, depth, torch.zeros_like(depth)), pad)
     seg_pad = torch.nn.functional.pad(seg, pad)
 
-    total = torch.zeros_like(depth)
-    count = torch.zeros_like(depth)
-    for dp, dq in _disc_offsets(radius):
-        rows = slice(reach + dp, reach + dp + height)
-        cols = slice(reach + dq, reach + dq + width)
-        nb_depth = depth_pad[:, rows, cols]
-        hit = (nb_depth > 0) & (seg_pad[:, rows, cols] == seg)
-        total = total + torch.where(hit, nb_depth, torch.zeros_like(depth))
-        count = count + hit.to(depth.dtype)
+    offsets = _disc_offsets(radius)
+    if accelerator_path(depth):
+        total, count = _disc_sums_gathered(depth_pad, seg_pad, seg, offsets,
+                                           reach)
+    else:
+        total, count = _disc_sums_looped(depth_pad, seg_pad, seg, offsets,
+                                         reach)
 
     mean = total / count.clamp(min=1)
     diffused = torch.where((seg != 0) & (count > 0), mean,
                            torch.zeros_like(depth))
     return torch.where(has_return, depth, diffused)
+
+
+def _disc_sums_looped(depth_pad: Tensor, seg_pad: Tensor, seg: Tensor,
+                      offsets, reach: int) -> Tuple[Tensor, Tensor]:
+    """Sum and count of the same-class returns over the disc, one offset at
+    a time (the CPU's path: whole-map operations that stay in cache).
+
+    Args:
+        depth_pad (Tensor): Depth, 0 without a return, padded by ``reach``.
+            Shape (N, H + 2 r, W + 2 r).
+        seg_pad (Tensor): Classes, padded alike.
+        seg (Tensor): Classes. Shape (N, H, W).
+        offsets (list[tuple[int, int]]): :func:`_disc_offsets`.
+        reach (int): The padding r.
+
+    Returns:
+        tuple[Tensor, Tensor]: Depth sum and count. Shape (N, H, W) each.
+    """
+    height, width = seg.shape[1:]
+    total = torch.zeros_like(depth_pad[:, reach:reach + height,
+                                       reach:reach + width])
+    count = torch.zeros_like(total)
+    for dp, dq in offsets:
+        rows = slice(reach + dp, reach + dp + height)
+        cols = slice(reach + dq, reach + dq + width)
+        nb_depth = depth_pad[:, rows, cols]
+        hit = (nb_depth > 0) & (seg_pad[:, rows, cols] == seg)
+        total = total + torch.where(hit, nb_depth, torch.zeros_like(total))
+        count = count + hit.to(total.dtype)
+    return total, count
+
+
+def _disc_sums_gathered(depth_pad: Tensor, seg_pad: Tensor, seg: Tensor,
+                        offsets, reach: int) -> Tuple[Tensor, Tensor]:
+    """:func:`_disc_sums_looped` with every offset's window stacked at
+    once: a fixed dozen launches on GPUs instead of ~9 per offset. Same
+    arguments and result (the sum runs in another order: equal to float
+    rounding)."""
+    height, width = seg.shape[1:]
+    side = 2 * reach + 1
+    slots = torch.tensor([(dp + reach) * side + dq + reach
+                          for dp, dq in offsets], device=seg.device)
+
+    def windows(padded: Tensor) -> Tensor:
+        # (N, H + 2r, W + 2r) -> (N, K, H, W), slot k = offsets[k].
+        win = padded.unfold(1, side, 1).unfold(2, side, 1)
+        win = win.reshape(*win.shape[:3], side * side)
+        return win.index_select(3, slots).permute(0, 3, 1, 2)
+
+    nb_depth = windows(depth_pad)
+    hit = (nb_depth > 0) & (windows(seg_pad) == seg.unsqueeze(1))
+    total = torch.where(hit, nb_depth, torch.zeros_like(nb_depth)).sum(1)
+    return total, hit.sum(1).to(total.dtype)

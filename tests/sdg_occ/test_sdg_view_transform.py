@@ -23,7 +23,7 @@ def _rig(num_cams):
     return cam2img, lidar2cam, (cam2img @ lidar2cam).float()
 
 
-def test_points_to_depth_maps_by_hand():
+def test_points_to_depth_maps_by_hand(code_path):
     """Camera 0 looks along +x, principal point (16, 8), f = 16, stride 8.
 
     (10, 0, 0) -> u = 16, v = 8 -> cell (floor(8 / 8), floor(16 / 8))
@@ -123,7 +123,7 @@ def _inputs(num_cams=2, seed=0):
 
 
 @pytest.mark.parametrize('fallback', ['lss', 'none'])
-def test_sdg_lift_matches_naive_loop(fallback):
+def test_sdg_lift_matches_naive_loop(fallback, code_path):
     """SDG points (r = 1 m, l = 1: 3 points) plus the LSS fallback equal
     the loop.
 
@@ -152,7 +152,7 @@ def test_sdg_lift_matches_naive_loop(fallback):
         assert out['num_lss_points'] == 0
 
 
-def test_guidance_depth_is_the_key_frame_only():
+def test_guidance_depth_is_the_key_frame_only(code_path):
     """A car at 5 m on camera 0's axis; 0.45 s earlier (time lag 0.45, a
     merged sweep) its return was at 3.5 m. Column 4 is the time lag: the
     sparse depth of cell (1, 2) is 5 (the key frame), not 3.5, and so is
@@ -196,7 +196,7 @@ def test_plain_lss_baseline_matches_naive_loop_and_caches():
     assert vt.lss_cache.misses == 1 and vt.lss_cache.hits == 1
 
 
-def test_no_points_and_backward():
+def test_no_points_and_backward(code_path):
     """No LiDAR point: SDG adds nothing; with fallback 'none' the BEV is
     empty, yet backward runs (zero gradient); with 'lss' gradients reach
     the context features and the depth distribution."""
@@ -238,3 +238,49 @@ def test_bad_inputs_raise():
     with pytest.raises(ValueError, match='point clouds'):
         points_to_depth_maps(points * 2, lidar2img[None], IMG_SHAPE,
                              FEAT_SHAPE)
+
+
+def test_gpu_path_equals_cpu_path():
+    """Two samples of 4 cameras and 40 random points, a third of them
+    from an earlier sweep: the GPUs' path (nearest depth by a min-scatter,
+    the key frame by a mask, every virtual point pooled with the invalid
+    ones in the drop cell, the diffusion's windows stacked) gives the CPU
+    path's depth maps exactly and its BEV, mask, point counts and
+    gradients to float rounding."""
+    from projects.occ_common.utils.device_path import forced_accelerator_path
+    _, _, lidar2img = _rig(4)
+    lidar2img = lidar2img[None].expand(2, -1, -1, -1)
+    gen = torch.Generator().manual_seed(3)
+    points = []
+    for _ in range(2):
+        pts = torch.rand(40, 5, generator=gen) * torch.tensor(
+            [20.0, 20.0, 4.0, 1.0, 1.0]) - torch.tensor(
+                [10.0, 10.0, 2.0, 0.0, 0.0])
+        pts[:, 4] = (pts[:, 4] < 0.33).float() * 0.45
+        points.append(pts)
+    context = torch.randn(8, 3, *FEAT_SHAPE, generator=gen)
+    prob = torch.randn(8, 8, *FEAT_SHAPE, generator=gen).softmax(1)
+    seg_logits = torch.randn(8, 3, *FEAT_SHAPE, generator=gen)
+    outs, grads = [], []
+    for gpu in (False, True):
+        vt = SDGViewTransform(PC_RANGE, BEV_SHAPE, DEPTH_BOUND,
+                              diffusion_radius=1.5, num_layers=2)
+        ctx, prb = context.clone().requires_grad_(), \
+            prob.clone().requires_grad_()
+        with forced_accelerator_path(gpu):
+            out = vt(ctx, prb, seg_logits, points, lidar2img, IMG_SHAPE,
+                     points_time_dims=[4, 4])
+        (out['bev'] * torch.arange(out['bev'].numel()).view_as(
+            out['bev']).sin()).sum().backward()
+        outs.append(out)
+        grads.append((ctx.grad, prb.grad))
+    cpu, gpu = outs
+    assert (cpu['sparse_depth'] > 0).sum() > 5
+    assert torch.equal(gpu['sparse_depth'], cpu['sparse_depth'])
+    torch.testing.assert_close(gpu['ext_depth'], cpu['ext_depth'])
+    torch.testing.assert_close(gpu['bev'], cpu['bev'])
+    assert torch.equal(gpu['bev_mask'], cpu['bev_mask'])
+    for key in ('num_sdg_points', 'num_lss_points'):
+        assert int(gpu[key]) == int(cpu[key]) > 0, key
+    for new, old in zip(grads[1], grads[0]):
+        torch.testing.assert_close(new, old)

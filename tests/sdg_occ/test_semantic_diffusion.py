@@ -17,7 +17,7 @@ def _scene():
     return depth, seg
 
 
-def test_same_class_mean_other_class_ignored_and_copoints_kept():
+def test_same_class_mean_other_class_ignored_and_copoints_kept(code_path):
     """Radius 2 on the 5x5 scene of ``_scene``.
 
     (0,1) class 1: returns (0,0)=4 and (0,2)=8, distances 1 and 1 -> 6.
@@ -36,7 +36,7 @@ def test_same_class_mean_other_class_ignored_and_copoints_kept():
     assert torch.equal(out, expected)
 
 
-def test_radius_boundary_is_inclusive():
+def test_radius_boundary_is_inclusive(code_path):
     """One return 10 m at (0,0), every pixel class 1, 3x3 image.
 
     Radius 2: d^2 <= 4 reaches (0,1) 1, (0,2) 4, (1,0) 1, (1,1) 2, (2,0) 4;
@@ -55,7 +55,7 @@ def test_radius_boundary_is_inclusive():
         out, torch.tensor([[[10., 10., 0.], [10., 10., 0.], [0., 0., 0.]]]))
 
 
-def test_radius_zero_keeps_only_copoints_and_images_do_not_mix():
+def test_radius_zero_keeps_only_copoints_and_images_do_not_mix(code_path):
     """Radius 0 changes nothing; a return in image 0 never reaches image 1.
 
     Image 1 has the same classes but no return, so it stays all 0 even with
@@ -72,7 +72,7 @@ def test_radius_zero_keeps_only_copoints_and_images_do_not_mix():
     assert out[0, 1, 0] == 6.0 and out[0, 0, 1] == 6.0
 
 
-def test_empty_inputs_and_backward():
+def test_empty_inputs_and_backward(code_path):
     """No image, and no return at all, give zeros; gradients are exact.
 
     On the 3x3 map of the boundary test (radius 2) the 10 m return is used

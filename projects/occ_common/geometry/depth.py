@@ -27,6 +27,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
+from ..utils.device_path import accelerator_path
 from ..utils.precision import float32_math
 
 ArrayOrTensor = Union[np.ndarray, Tensor]
@@ -205,8 +206,14 @@ def nearest_depth_map(points: Tensor,
                       lidar2img: Tensor,
                       img_shape: Sequence[int],
                       map_shape: Sequence[int],
-                      min_depth: float = 0.0) -> Tensor:
+                      min_depth: float = 0.0,
+                      point_mask: Optional[Tensor] = None) -> Tensor:
     """Sparse depth map of one sample: nearest return per map cell.
+
+    The CPU's path keeps the nearest point of each cell by two stable sorts
+    (:func:`project_nearest`, shared with the numpy transforms); the GPUs'
+    takes the minimum depth of each cell with one ``scatter_reduce``, the
+    same value without a host read of the hit count.
 
     Args:
         points (Tensor): Working-frame points, (x, y, z, ...).
@@ -216,6 +223,8 @@ def nearest_depth_map(points: Tensor,
         img_shape (Sequence[int]): Network input ``(H, W)``.
         map_shape (Sequence[int]): Map ``(h, w)``.
         min_depth (float): Nearer returns are dropped. Defaults to 0.
+        point_mask (Tensor, optional): bool, the points used (e.g. the
+            key frame's). Defaults to None (all). Shape (P,).
 
     Returns:
         Tensor: Depth, 0 where no return. Shape (N, h, w), the dtype of
@@ -224,6 +233,14 @@ def nearest_depth_map(points: Tensor,
     if points.dim() != 2 or points.shape[1] < 3:
         raise ValueError(f'points must be (P, C >= 3), got '
                          f'{tuple(points.shape)}')
+    if point_mask is not None and point_mask.shape != points.shape[:1]:
+        raise ValueError(f'point_mask must be ({points.shape[0]},), got '
+                         f'{tuple(point_mask.shape)}')
+    if accelerator_path(points):
+        return _nearest_depth_map_scatter(points, lidar2img, img_shape,
+                                          map_shape, min_depth, point_mask)
+    if point_mask is not None:
+        points = points[point_mask]
     map_h, map_w = (int(v) for v in map_shape)
     out = lidar2img.new_zeros(lidar2img.shape[0], map_h, map_w)
     view, row, col, depth, _ = project_nearest(
@@ -231,6 +248,40 @@ def nearest_depth_map(points: Tensor,
         map_shape=map_shape)
     out[view, row, col] = depth
     return out
+
+
+def _nearest_depth_map_scatter(points: Tensor, lidar2img: Tensor,
+                               img_shape: Sequence[int],
+                               map_shape: Sequence[int], min_depth: float,
+                               point_mask: Optional[Tensor],
+                               eps: float = 1e-5) -> Tensor:
+    """:func:`nearest_depth_map` without a host sync: the cell of every
+    (view, point) pair, pairs that miss go to one extra cell, and a
+    ``scatter_reduce('amin')``. Same arguments and result (the projection,
+    the cell rule and the depth limits are :func:`project_nearest`'s)."""
+    img_h, img_w = (int(v) for v in img_shape)
+    map_h, map_w = (int(v) for v in map_shape)
+    num_views = lidar2img.shape[0]
+    num_cells = num_views * map_h * map_w
+    xyz = points[:, :3].to(lidar2img)
+    u_depth, v_depth, depth = _Ops(xyz).project(xyz, lidar2img)
+    safe = depth.clip(min=eps)
+    col = torch.floor(u_depth / safe * (map_w / img_w))
+    row = torch.floor(v_depth / safe * (map_h / img_h))
+    keep = (depth > min_depth) & (col >= 0) & (col < map_w) & (row >= 0) & \
+        (row < map_h)
+    if point_mask is not None:
+        keep = keep & point_mask
+    view = torch.arange(num_views, device=xyz.device).unsqueeze(1)
+    # Where ``keep`` is False the float cell may be NaN or huge; its
+    # integer is never used.
+    cell = torch.where(keep, (view * map_h + row.long()) * map_w + col.long(),
+                       torch.full_like(view, num_cells))
+    nearest = depth.new_full((num_cells + 1, ), float('inf')).scatter_reduce_(
+        0, cell.reshape(-1), depth.reshape(-1), 'amin')
+    nearest = nearest[:num_cells]
+    return torch.where(torch.isinf(nearest), torch.zeros_like(nearest),
+                       nearest).view(num_views, map_h, map_w)
 
 
 def patch_min_depth(gt_depth: Tensor, downsample: int) -> Tensor:

@@ -21,7 +21,8 @@ Conventions (those of mmdet3d 1.x ``lidar2img``):
   their near edge ``min + k * step``), shared with the depth loss and the
   depth-map transforms.
 """
-from typing import Sequence
+import functools
+from typing import Sequence, Tuple
 
 import torch
 from torch import Tensor
@@ -56,6 +57,34 @@ def create_frustum(img_shape: Sequence[int], feat_shape: Sequence[int],
     vs = (torch.arange(feat_h) + 0.5) * (img_h / feat_h)
     d, v, u = torch.meshgrid(depths, vs, us, indexing='ij')
     return torch.stack([u, v, d], dim=-1)
+
+
+@functools.lru_cache(maxsize=16)
+def _device_frustum(img_shape: Tuple[int, int], feat_shape: Tuple[int, int],
+                    depth_bound: Tuple[float, ...],
+                    device: torch.device) -> Tensor:
+    frustum = create_frustum(img_shape, feat_shape, depth_bound).to(device)
+    # Shared between calls: a write would change every later lift.
+    frustum.requires_grad_(False)
+    return frustum
+
+
+def device_frustum(img_shape: Sequence[int], feat_shape: Sequence[int],
+                   depth_bound: Sequence[float],
+                   device: torch.device) -> Tensor:
+    """:func:`create_frustum` on ``device``, made once per geometry.
+
+    The frustum depends only on the sizes and the bins, so a model that
+    lifts every batch need not rebuild it on the host and copy it to the
+    GPU each time (a host-to-device copy per call). The tensor is shared
+    between callers: read it, never write it.
+
+    Returns:
+        Tensor: float32. Shape (D, h, w, 3).
+    """
+    return _device_frustum(
+        tuple(int(v) for v in img_shape), tuple(int(v) for v in feat_shape),
+        tuple(float(v) for v in depth_bound), torch.device(device))
 
 
 @float32_math
@@ -137,10 +166,11 @@ def cylindrical_position_embedding(points: Tensor,
                          f'{tuple(points.shape)}')
     if len(cyl_range) != 6:
         raise ValueError(f'cyl_range must have 6 values, got {cyl_range}')
+    if any(float(h) <= float(low)
+           for low, h in zip(cyl_range[:3], cyl_range[3:])):
+        raise ValueError(f'cyl_range needs max > min per axis: {cyl_range}')
     lo = points.new_tensor(cyl_range[:3])
     hi = points.new_tensor(cyl_range[3:])
-    if bool((hi <= lo).any()):
-        raise ValueError(f'cyl_range needs max > min per axis: {cyl_range}')
     r, theta, z = cartesian_to_cylindrical(points).unbind(-1)
     emb = torch.stack([(r - lo[0]) / (hi[0] - lo[0]),
                        torch.sin(theta),

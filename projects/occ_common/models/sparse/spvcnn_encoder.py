@@ -275,9 +275,12 @@ class SPVCNNEncoder(BaseModule):
         low = cat.new_tensor(self.point_cloud_range[:3])
         high = cat.new_tensor(self.point_cloud_range[3:])
         xyz = cat[:, :3]
-        keep = ((xyz >= low) & (xyz < high)).all(dim=1)
-        position = ((xyz[keep] - low) / cat.new_tensor(self.voxel_size))
-        return batch[keep], position.flip(1), cat[keep]
+        # One host read of the kept count (three boolean indexes would
+        # read it three times).
+        keep = ((xyz >= low) & (xyz < high)).all(dim=1).nonzero().squeeze(1)
+        cat = cat.index_select(0, keep)
+        position = (cat[:, :3] - low) / cat.new_tensor(self.voxel_size)
+        return batch.index_select(0, keep), position.flip(1), cat
 
     def _bev_cells(self, coords: Tensor, stride: int) -> Tuple[Tensor, Tensor]:
         """BEV (row, column) of the centres of voxels at a given stride."""

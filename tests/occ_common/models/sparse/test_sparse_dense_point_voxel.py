@@ -69,7 +69,7 @@ def test_to_dense_bev_pooling_and_empty():
                     torch.zeros(2), 1, (1, 2), 'median')
 
 
-def test_scatter_mean_by_hand():
+def test_scatter_mean_by_hand(code_path):
     """src [1, 3, 5] to rows [0, 0, 2] of 3: [(1 + 3) / 2, 0, 5] = [2, 0, 5].
     Each source gets gradient 1 / (count of its row): [0.5, 0.5, 1]."""
     src = torch.tensor([[1.], [3.], [5.]], requires_grad=True)
@@ -114,7 +114,7 @@ def test_voxel_rows_and_point_to_voxel():
     assert means[:, 0].tolist() == [6., 4.]
 
 
-def test_trilinear_devoxelize_by_hand():
+def test_trilinear_devoxelize_by_hand(code_path):
     """Voxels x0 = 1 and x1 = 3 on a (1, 1, 3) line (x2 inactive); points
     at the voxel centre height (z = y = 0.5, weights 1 / 0 there).
 
@@ -224,7 +224,7 @@ def _random_voxels(seed):
 
 
 @pytest.mark.parametrize('seed', [0, 1])
-def test_trilinear_plan_matches_dense_reference(seed):
+def test_trilinear_plan_matches_dense_reference(seed, code_path):
     """The shared-lookup plan gives the dense grid's interpolation and its
     feature gradient for points in any order, inside the grid or outside
     it; every row of weights sums to 1 or (no active corner) to 0."""
@@ -283,3 +283,20 @@ def test_linear_bn_relu_eval_folds_norm_training_unchanged():
     torch.testing.assert_close(mlp(feats), ref)
     torch.testing.assert_close(mlp.norm.running_mean,
                                0.9 * mean_before + 0.1 * linear.mean(0))
+
+
+def test_gpu_plan_equals_the_cpu_plan():
+    """The GPUs' plan (all 8 corners of every point in one search, no
+    ``unique_consecutive``) has the CPU's rows and weights exactly, for
+    points inside and outside the grid, grouped by cell or not."""
+    from projects.occ_common.utils.device_path import forced_accelerator_path
+    x, batch, position = _random_voxels(3)
+    for order in (torch.argsort(batch * 10**6 + (position * 10).long().sum(
+            1)), torch.arange(60)):
+        with forced_accelerator_path(False):
+            cpu = trilinear_plan(x, batch[order], position[order])
+        with forced_accelerator_path(True):
+            gpu = trilinear_plan(x, batch[order], position[order])
+        assert torch.equal(gpu.weights, cpu.weights)
+        assert torch.equal(gpu.rows, cpu.rows)
+        assert (cpu.weights > 0).any(1).sum() > 40

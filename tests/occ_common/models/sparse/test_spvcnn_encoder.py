@@ -69,7 +69,7 @@ def test_forward_backward_shapes_and_gradients():
         assert bool(torch.isfinite(param.grad).all()), name
 
 
-def test_bev_mask_by_hand():
+def test_bev_mask_by_hand(code_path):
     """Cell = floor(voxel centre / 2 m) per axis, (row y, column x):
     sample 0: (0.5, 0.5, 0.5) -> voxel (0, 0) -> cell (0, 0);
     (1.2, 0.3, 3.5) -> voxel (1, 0) -> centre (1.5, 0.5) -> cell (0, 0);
@@ -131,7 +131,7 @@ def test_point_offsets_are_the_point_inputs():
     assert out['bev'].abs().sum().item() == 0.
 
 
-def test_empty_point_cloud():
+def test_empty_point_cloud(code_path):
     """No points at all: zero BEV, all-False mask, and backward still
     reaches every parameter (with zero gradient)."""
     enc = _encoder()
@@ -145,7 +145,7 @@ def test_empty_point_cloud():
     assert torch.count_nonzero(conv_weight.grad) == 0
 
 
-def test_batch_with_one_empty_sample():
+def test_batch_with_one_empty_sample(code_path):
     """A batch [cloud, empty] equals [cloud] alone for sample 0 (eval mode,
     and in training the empty sample adds no rows to the batch norms);
     sample 1 is zero with an all-False mask. Backward runs in training."""
@@ -290,7 +290,7 @@ def test_spconv_and_torch_backends_agree():
     dict(point_offsets=True),
     dict(stage_strides=(2, 2), bev_shape=(2, 2), bev_reduce='mean')
 ])
-def test_forward_and_gradients_match_point_by_point_reference(kwargs):
+def test_forward_and_gradients_match_point_by_point_reference(kwargs, code_path):
     """The shared corner lookups, the per-voxel parent lookups, the in-place
     sum and (in eval) the folded point MLPs give the BEV and, in training,
     the parameter gradients of the layers applied point by point
