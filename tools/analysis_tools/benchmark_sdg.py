@@ -47,7 +47,6 @@ import json
 import os.path as osp
 import statistics
 
-import mmengine
 import numpy as np
 import torch
 import torch.nn.functional as F
@@ -57,6 +56,7 @@ from mmengine.registry import init_default_scope
 from mmengine.utils import import_modules_from_strings
 
 from projects.occ_common.utils.benchmarking import timed_runs
+from projects.occ_common.utils.safe_pickle import load_info_file
 
 ROOT = osp.dirname(
     osp.dirname(osp.dirname(osp.abspath(__file__))))
@@ -105,7 +105,8 @@ def real_sample(cfg, folder):
         dict: ``inputs`` and ``data_samples`` as a dataset item.
     """
     (pkl, ) = glob.glob(osp.join(folder, '*.pkl'))
-    info = mmengine.load(pkl)['data_list'][0]
+    # A downloaded info file: the restricted unpickler, as everywhere.
+    info = load_info_file(pkl)['data_list'][0]
     lidar = info['lidar_points']
     lidar['lidar_path'] = osp.join(folder, lidar['lidar_path'])
     info.update(

@@ -1,12 +1,13 @@
 """Load every checkpoint of a run through the restricted unpickler.
 
 :func:`~projects.occ_common.utils.safe_pickle.install_checkpoint_loader`
-makes mmengine load local and ``http(s)`` checkpoints with the restricted
-unpickler of :mod:`projects.occ_common.utils.safe_pickle`, which reads
-Runner checkpoints, zoo checkpoints included, and refuses anything else by
-name. Nothing is installed on import: this hook does it in ``before_run``,
-which ``Runner.train`` / ``val`` / ``test`` call before they initialise
-weights, load or resume.
+makes mmengine load the checkpoints of every scheme (local, ``http(s)``,
+``open-mmlab://`` ...) with the restricted loader of
+:mod:`projects.occ_common.utils.safe_pickle`, which reads Runner
+checkpoints, zoo checkpoints included, and refuses anything else by name
+(a TorchScript archive by what it is). Nothing is installed on import:
+this hook does it in ``before_run``, which ``Runner.train`` / ``val`` /
+``test`` call before they initialise weights, load or resume.
 
 Earlier versions of this hook stored the message hub's ``HistoryBuffer``\\ s
 of a checkpoint as tagged dicts (so that no ``getattr`` was pickled); the

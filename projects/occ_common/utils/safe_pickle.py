@@ -10,22 +10,34 @@ is executed:
 * **Info files** (:func:`load_info_file`): builtin containers and scalars
   and numpy arrays, scalars and dtypes, which is all the converter (and
   mmdet3d's own info files) write. Python's C unpickler with a restricted
-  ``find_class``: every object it can reach is a builtin or numpy C type,
-  whose state an attacker cannot rewrite, so it keeps the C speed (info
-  files of a full dataset are large).
-* **Checkpoints** (:func:`load_checkpoint_file`): ``torch.load(...,
-  weights_only=False, pickle_module=CHECKPOINT_PICKLE)`` with the info-file
-  list plus torch's tensor / storage rebuild functions, ``torch.Size``,
-  dtypes, ``collections.OrderedDict`` and mmengine's ``HistoryBuffer``
-  (the message hub of a Runner checkpoint). The same call works on torch
-  2.0 ... 2.13 and on both of torch's file formats (zip and legacy), unlike
-  ``torch.serialization.add_safe_globals`` (torch >= 2.4). This unpickler
-  is pickle's pure-Python one, because it must also restrict ``BUILD``
-  (setting an object's state) to numpy arrays / dtypes, ``HistoryBuffer``
-  instances and ``OrderedDict`` (a state dict's ``_metadata``): the
-  Python functions on the list must not have their attributes rewritten.
-  A checkpoint pickle holds only the structure (tensor data lies in
-  separate records), so this costs little.
+  ``find_class`` (info files of a full dataset are large; this library's
+  own hold no numpy object). A file naming numpy is read again with the
+  pure-Python unpickler, whose ``BUILD`` rebuilds numpy objects only
+  through the checks of :mod:`.safe_numpy`: numpy's ``__setstate__``
+  trusts the file, and allowed globals suffice to forge an object array.
+* **Checkpoints** (:func:`load_checkpoint_file`): first the format
+  (:mod:`.checkpoint_format`): a TorchScript archive, which ``torch.load``
+  would hand to ``torch.jit.load`` and so run its code, and any file but
+  a plain ``torch.save`` zip or legacy pickle are refused before torch
+  reads them. Then ``torch.load(..., weights_only=False,
+  pickle_module=CHECKPOINT_PICKLE)`` with the info-file list plus torch's
+  tensor / storage rebuild functions, ``torch.Size``, dtypes,
+  ``collections.OrderedDict`` and mmengine's ``HistoryBuffer`` (the
+  message hub of a Runner checkpoint), on torch 2.0 ... 2.13 and both of
+  torch's file formats. This unpickler is pickle's pure-Python one, as it
+  must also restrict ``BUILD`` (setting an object's state) to checked
+  numpy objects, ``HistoryBuffer`` instances and ``OrderedDict`` (a state
+  dict's ``_metadata``): the Python functions on the list must not have
+  their attributes rewritten. A checkpoint pickle holds only the
+  structure (tensor data lies in separate records): this costs little.
+
+``torch.load(weights_only=True)`` with ``add_safe_globals`` (torch >= 2.4)
+is not used instead: its ``BUILD`` calls the ``__setstate__`` of any
+allow-listed type with the file's state, for numpy dtypes exactly the call
+a forged dtype abuses; ``getattr(HistoryBuffer, 'min')`` needs the tuple
+form of ``add_safe_globals`` (newer torch) in a process-wide registry; and
+its default list allows more tensor kinds (sparse, quantized, nested) than
+a checkpoint holds.
 
 A Runner checkpoint written by plain mmengine (every zoo checkpoint of
 OpenMMLab) pickles the statistics methods of its ``HistoryBuffer``\\ s as
@@ -34,6 +46,11 @@ allowed with exactly that object and the statistic names ``HistoryBuffer``
 registers, and with nothing else; the class-level registry of statistic
 methods, which ``HistoryBuffer.__setstate__`` updates from the file, is
 restored after every load, so a file cannot leave a method behind.
+
+mmengine's ``CheckpointLoader`` (``load_from``, ``--resume``,
+``init_cfg=dict(type='Pretrained')``, every URL scheme) is pointed at
+:func:`load_checkpoint_file` by :func:`install_checkpoint_loader`
+(:mod:`.checkpoint_schemes`).
 """
 import _compat_pickle
 import collections
@@ -45,11 +62,14 @@ import os
 import os.path as osp
 import pickle
 import types
-import zipfile
-from typing import Any, Callable, Dict, Iterator, Optional, Union
+from typing import Any, BinaryIO, Callable, Dict, Iterator, Optional, Union
 
 import numpy as np
 import torch
+
+from . import safe_numpy
+from .checkpoint_format import LEGACY, TORCHSCRIPT, ZIP, checkpoint_format
+from .safe_numpy import UnsafeArrayError, numpy_core
 
 
 class RefusedGlobalError(pickle.UnpicklingError):
@@ -65,29 +85,22 @@ class RefusedGlobalError(pickle.UnpicklingError):
         self.qualname = qualname
 
 
-def _numpy_core() -> str:
-    """``numpy._core`` (numpy 2) or ``numpy.core`` (numpy 1)."""
-    if np.lib.NumpyVersion(np.__version__) >= '2.0.0':
-        return 'numpy._core'
-    return 'numpy.core'
-
-
 # numpy 2 pickles name ``numpy._core``, numpy 1 ``numpy.core``: a file from
 # either loads under either (the objects are the same).
 _NUMPY_ALIASES = {
-    f'numpy.{core}.{module}': f'{_numpy_core()}.{module}'
+    f'numpy.{core}.{module}': f'{numpy_core()}.{module}'
     for core in ('core', '_core') for module in ('multiarray', 'numeric')
 }
 
 #: Globals of an info file: builtin containers and scalars, numpy arrays,
-#: scalars and dtypes. ``_codecs.encode`` is how pickle protocol 2 writes
-#: ``bytes``, ``_frombuffer`` how protocol 5 writes arrays.
+#: scalars and dtypes (resolved to the checked constructors of
+#: :data:`.safe_numpy.CONSTRUCTORS`). ``_codecs.encode`` is how pickle
+#: protocol 2 writes ``bytes`` (``bytes()`` the empty ones, the data of
+#: an empty array), ``_frombuffer`` how protocol 5 writes arrays.
 INFO_GLOBALS = frozenset({
     'builtins.set', 'builtins.frozenset', 'builtins.bytearray',
-    'builtins.complex', 'builtins.slice', '_codecs.encode',
-    'numpy.ndarray', 'numpy.dtype', f'{_numpy_core()}.multiarray._reconstruct',
-    f'{_numpy_core()}.multiarray.scalar',
-    f'{_numpy_core()}.numeric._frombuffer'
+    'builtins.bytes', 'builtins.complex', 'builtins.slice', '_codecs.encode',
+    *safe_numpy.CONSTRUCTORS
 })
 
 
@@ -157,7 +170,7 @@ def _history_buffer_getattr(obj: Any, name: str) -> Callable:
     """
     buffer = _history_buffer()
     if obj is not buffer or name not in statistic_names():
-        what = getattr(obj, '__qualname__', type(obj).__qualname__)
+        what = getattr(obj, '__qualname__', None) or repr(obj)[:60]
         raise RefusedGlobalError(
             f'builtins.getattr({what}, {name!r}) (getattr is allowed only on'
             f' HistoryBuffer and its statistics {sorted(statistic_names())})'
@@ -166,10 +179,12 @@ def _history_buffer_getattr(obj: Any, name: str) -> Callable:
 
 
 def _resolve(qualname: str) -> Any:
-    """The object of an allowed ``module.name`` (``builtins.getattr``: the
-    restricted one)."""
+    """The object of an allowed ``module.name`` (``builtins.getattr`` and
+    numpy's names: the restricted ones)."""
     if qualname == 'builtins.getattr':
         return _history_buffer_getattr
+    if qualname in safe_numpy.CONSTRUCTORS:
+        return safe_numpy.CONSTRUCTORS[qualname]
     module, name = qualname.rsplit('.', 1)
     return getattr(importlib.import_module(module), name)
 
@@ -203,22 +218,29 @@ def _find_allowed(module: str,
     qualname = f'{module}.{name}'
     if qualname in allowed:
         return _resolve(qualname)
-    if module == 'numpy.dtypes' and name.endswith('DType'):
-        # numpy >= 1.25 dtype classes (Float64DType ...), rebuilt by BUILD.
-        found = getattr(importlib.import_module('numpy.dtypes'), name, None)
-        if isinstance(found, type) and issubclass(found, np.dtype):
-            return found
     if module == 'torch' and torch_dtypes and name in _TORCH_DTYPES:
         return _TORCH_DTYPES[name]
     raise RefusedGlobalError(qualname)
 
 
+class _NumpyInFile(Exception):
+    """The C unpickler met a numpy name: read the file in pure Python."""
+
+
 class InfoUnpickler(pickle.Unpickler):
-    """C unpickler resolving only :data:`INFO_GLOBALS`."""
+    """C unpickler resolving only :data:`INFO_GLOBALS` but numpy's.
+
+    It cannot check ``BUILD``: a numpy name raises :class:`_NumpyInFile`
+    before anything of numpy is built, and :func:`load_info_file` reads
+    the file again with :class:`CheckedUnpickler`.
+    """
 
     def find_class(self, module: str, name: str) -> Any:
         """Resolve an allowed global or raise :class:`RefusedGlobalError`."""
-        return _find_allowed(module, name, INFO_GLOBALS)
+        found = _find_allowed(module, name, INFO_GLOBALS)
+        if any(found is value for value in safe_numpy.CONSTRUCTORS.values()):
+            raise _NumpyInFile(f'{module}.{name}')
+        return found
 
 
 @contextlib.contextmanager
@@ -244,31 +266,56 @@ def _statistics_registry_restored() -> Iterator[None]:
         registry.update(before)
 
 
-class CheckpointUnpickler(pickle._Unpickler):
-    """Pure-Python unpickler for checkpoints (see the module docstring).
+class CheckedUnpickler(pickle._Unpickler):
+    """Pure-Python unpickler checking globals and every ``BUILD``.
 
-    Resolves :data:`INFO_GLOBALS` and :data:`CHECKPOINT_GLOBALS` and
-    applies ``BUILD`` only to numpy arrays and dtypes, ``HistoryBuffer``
-    instances and ``OrderedDict`` objects.
+    Resolves :data:`INFO_GLOBALS`; ``BUILD`` of numpy dtypes and arrays
+    goes through :func:`.safe_numpy.build`, of other objects only where
+    :meth:`may_build` allows it (never, for info files).
     """
 
-    _ALLOWED = INFO_GLOBALS | CHECKPOINT_GLOBALS
+    _ALLOWED = INFO_GLOBALS
+    _TORCH_DTYPES = False
     dispatch = dict(pickle._Unpickler.dispatch)
 
     def find_class(self, module: str, name: str) -> Any:
         """Resolve an allowed global or raise :class:`RefusedGlobalError`."""
-        return _find_allowed(module, name, self._ALLOWED, torch_dtypes=True)
+        return _find_allowed(module, name, self._ALLOWED, self._TORCH_DTYPES)
+
+    def may_build(self, inst: Any) -> bool:
+        """Whether ``BUILD`` may set the state of ``inst`` (not numpy)."""
+        return False
 
     def load_build(self) -> None:
-        """``BUILD`` on the allowed stateful types only."""
+        """``BUILD``: numpy checked, other types if :meth:`may_build`."""
         inst = self.stack[-2]  # the state is on top
-        if not (isinstance(inst, (np.ndarray, np.dtype, _history_buffer()))
-                or type(inst) is collections.OrderedDict):
+        if isinstance(inst, (np.ndarray, np.dtype)):
+            safe_numpy.build(inst, self.stack.pop())
+            return
+        if not self.may_build(inst):
             raise RefusedGlobalError(
                 f'BUILD (setting the state) of a {type(inst).__qualname__}')
         super().load_build()
 
     dispatch[pickle.BUILD[0]] = load_build
+
+
+class CheckpointUnpickler(CheckedUnpickler):
+    """Pure-Python unpickler for checkpoints (see the module docstring).
+
+    Resolves :data:`INFO_GLOBALS` and :data:`CHECKPOINT_GLOBALS`;
+    ``BUILD`` also on ``HistoryBuffer`` instances and ``OrderedDict``
+    objects.
+    """
+
+    _ALLOWED = INFO_GLOBALS | CHECKPOINT_GLOBALS
+    _TORCH_DTYPES = True
+
+    def may_build(self, inst: Any) -> bool:
+        """``HistoryBuffer`` and ``OrderedDict`` (a state dict's
+        ``_metadata``)."""
+        return (isinstance(inst, _history_buffer())
+                or type(inst) is collections.OrderedDict)
 
     def load(self) -> Any:
         """Unpickle, keeping ``HistoryBuffer``'s registry unchanged."""
@@ -316,14 +363,23 @@ def load_info_file(path: str) -> Any:
 
     Raises:
         FileNotFoundError: If ``path`` is not a file.
-        RefusedGlobalError: If it names another global; the message names
-            the file and the global, and nothing from it was executed.
+        RefusedGlobalError: If it names another global, or a numpy object
+            numpy would build unsafely; the message names the file and
+            what was refused, and nothing from it was executed.
         CorruptFileError: If it is empty, truncated or not a pickle.
     """
     _check_file(path, 'info file')
     with open(path, 'rb') as f:
         try:
-            return InfoUnpickler(f).load()
+            try:
+                return InfoUnpickler(f).load()
+            except _NumpyInFile:
+                f.seek(0)
+                return CheckedUnpickler(f).load()
+        except UnsafeArrayError as err:
+            raise RefusedGlobalError(
+                f'Refusing to load info file {path}: it pickles '
+                f'{err.qualname}. Nothing from it was executed.') from None
         except RefusedGlobalError as err:
             raise RefusedGlobalError(
                 f'Refusing to load info file {path}: it pickles '
@@ -337,10 +393,11 @@ def load_info_file(path: str) -> Any:
                 'tools/create_data.py --overwrite.') from None
 
 
+MapLocation = Optional[Union[str, Callable, torch.device, Dict]]
+
+
 def load_checkpoint_file(filename: str,
-                         map_location: Optional[Union[str, Callable,
-                                                      torch.device,
-                                                      Dict]] = None) -> Any:
+                         map_location: MapLocation = None) -> Any:
     """Load a local checkpoint through the restricted unpickler.
 
     Args:
@@ -353,30 +410,64 @@ def load_checkpoint_file(filename: str,
 
     Raises:
         FileNotFoundError: If ``filename`` is not a file.
-        UnsafeCheckpointError: If it pickles a global outside the
-            allow-list; the message names the file and the global, and
-            nothing from it was executed.
+        UnsafeCheckpointError: If it is a TorchScript archive, or pickles
+            a global outside the allow-list or a numpy object numpy would
+            build unsafely; the message names the file and what was
+            refused, and nothing from it was executed.
         CorruptFileError: If it is empty, truncated or not a checkpoint.
     """
     filename = osp.expanduser(filename)
     _check_file(filename, 'checkpoint')
     with open(filename, 'rb') as f:
-        head = f.read(2)
-    # torch's zip format, or its legacy format (a protocol-2 pickle).
-    if not (zipfile.is_zipfile(filename) or head[:1] == b'\x80'):
+        return load_checkpoint_stream(f, filename, map_location)
+
+
+def load_checkpoint_stream(file: BinaryIO,
+                           name: str,
+                           map_location: MapLocation = None) -> Any:
+    """:func:`load_checkpoint_file` of an open file (a download in memory).
+
+    The format is checked on the same open file that ``torch.load`` then
+    reads, so the file checked is the file loaded.
+
+    Args:
+        file (BinaryIO): Seekable, at its start.
+        name (str): The file's name or URL, for the messages.
+        map_location (str | callable | torch.device | dict, optional): As
+            for :func:`torch.load`. Defaults to None.
+
+    Returns:
+        dict: The checkpoint.
+
+    Raises:
+        UnsafeCheckpointError: See :func:`load_checkpoint_file`.
+        CorruptFileError: See :func:`load_checkpoint_file`.
+    """
+    kind, detail = checkpoint_format(file)
+    if kind == TORCHSCRIPT:
+        raise UnsafeCheckpointError(
+            f'Refusing to load checkpoint {name}: it is a TorchScript '
+            f'archive ({detail}), and TorchScript is not a checkpoint: '
+            'torch.load would hand it to torch.jit.load, which runs the '
+            'code it carries. Nothing from it was executed. Use the '
+            'checkpoint (.pth of torch.save) of the model instead.')
+    if kind not in (ZIP, LEGACY):
         raise CorruptFileError(
-            f'checkpoint {filename} is truncated or not a torch checkpoint '
-            f'(neither a complete zip archive nor a legacy pickle; it starts '
-            f'with {head!r}).')
+            f'checkpoint {name} is truncated or not a torch checkpoint '
+            f'({detail}).')
     try:
         return torch.load(
-            filename,
+            file,
             map_location=map_location,
             pickle_module=CHECKPOINT_PICKLE,
             weights_only=False)
+    except UnsafeArrayError as err:
+        raise UnsafeCheckpointError(
+            f'Refusing to load checkpoint {name}: it pickles '
+            f'{err.qualname}. Nothing from it was executed.') from None
     except RefusedGlobalError as err:
         raise UnsafeCheckpointError(
-            f'Refusing to load checkpoint {filename}: it pickles '
+            f'Refusing to load checkpoint {name}: it pickles '
             f'{err.qualname}, which is outside the allow-list of tensors, '
             'containers, numpy arrays and mmengine message hubs. Nothing '
             'from it was executed. If you trust this file, load it with '
@@ -391,74 +482,29 @@ def load_checkpoint_file(filename: str,
             raise
         first_line = (str(err).splitlines() or [''])[0]
         raise CorruptFileError(
-            f'checkpoint {filename} is truncated or not a torch checkpoint '
+            f'checkpoint {name} is truncated or not a torch checkpoint '
             f'({type(err).__name__}: {first_line}).') from None
 
 
-def _load_from_local(filename: str, map_location=None):
-    """mmengine ``CheckpointLoader`` scheme of local paths."""
-    return load_checkpoint_file(filename, map_location)
-
-
-def _load_from_http(filename: str, map_location=None, model_dir=None):
-    """mmengine ``CheckpointLoader`` scheme of ``http(s)://`` URLs.
-
-    Downloads into torch hub's cache as mmengine does (rank 0 first), then
-    loads the file like a local one.
-    """
-    from urllib.parse import urlparse
-
-    from mmengine.dist import barrier, get_dist_info
-    rank, world_size = get_dist_info()
-    folder = model_dir or osp.join(torch.hub.get_dir(), 'checkpoints')
-    cached = osp.join(folder, osp.basename(urlparse(filename).path))
-
-    def download():
-        if not osp.isfile(cached):
-            os.makedirs(folder, exist_ok=True)
-            torch.hub.download_url_to_file(filename, cached, progress=False)
-
-    if rank == 0:
-        download()
-    if world_size > 1:
-        barrier()
-        if rank > 0:
-            download()
-    return load_checkpoint_file(cached, map_location)
-
-
 def install_checkpoint_loader() -> None:
-    """Make mmengine load local and ``http(s)`` checkpoints restrictedly.
+    """Make mmengine load checkpoints of every scheme restrictedly.
 
-    Replaces mmengine's loaders of the local scheme ``''`` and of
-    ``http://`` / ``https://`` (``force=True``: mmengine offers no other
-    way to choose how a scheme unpickles). Nothing is installed on import:
-    :class:`~projects.occ_common.hooks.WeightsOnlyCheckpointHook` calls
-    this in ``before_run`` (before the Runner loads, resumes or
-    initialises weights) and ``tools/test.py`` before it builds the
-    Runner. Calling it again does nothing more.
+    See :func:`.checkpoint_schemes.install_checkpoint_loader`.
     """
-    from mmengine.runner.checkpoint import CheckpointLoader
-    schemes = CheckpointLoader._schemes
-    if schemes.get('') is not _load_from_local:
-        CheckpointLoader.register_scheme(
-            prefixes='', loader=_load_from_local, force=True)
-    if schemes.get('https://') is not _load_from_http:
-        CheckpointLoader.register_scheme(
-            prefixes=('http://', 'https://'),
-            loader=_load_from_http,
-            force=True)
+    from .checkpoint_schemes import install_checkpoint_loader as install
+    install()
 
 
 def is_installed() -> bool:
     """Whether :func:`install_checkpoint_loader` has run in this process."""
-    from mmengine.runner.checkpoint import CheckpointLoader
-    return CheckpointLoader._schemes.get('') is _load_from_local
+    from .checkpoint_schemes import is_installed as installed
+    return installed()
 
 
 __all__ = [
     'CHECKPOINT_GLOBALS', 'CHECKPOINT_PICKLE', 'CorruptFileError',
-    'INFO_GLOBALS', 'RefusedGlobalError', 'UnsafeCheckpointError',
-    'install_checkpoint_loader', 'is_installed', 'load_checkpoint_file',
-    'load_info_file', 'statistic_names'
+    'INFO_GLOBALS', 'RefusedGlobalError', 'UnsafeArrayError',
+    'UnsafeCheckpointError', 'install_checkpoint_loader', 'is_installed',
+    'load_checkpoint_file', 'load_checkpoint_stream', 'load_info_file',
+    'statistic_names'
 ]

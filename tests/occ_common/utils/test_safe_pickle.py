@@ -375,11 +375,12 @@ def test_downloaded_checkpoints_are_loaded_restrictedly(zoo_checkpoint,
     from mmengine.runner.checkpoint import CheckpointLoader
 
     from projects.occ_common.utils import install_checkpoint_loader
-    from projects.occ_common.utils.safe_pickle import _load_from_http
+    from projects.occ_common.utils.checkpoint_schemes import _load_from_http
     install_checkpoint_loader()
     for url in ('https://host/zoo.pth', 'http://host/zoo.pth', 'zoo.pth'):
         loader = CheckpointLoader._get_checkpoint_loader(url)
-        assert loader.__module__ == 'projects.occ_common.utils.safe_pickle'
+        assert loader.__module__ == \
+            'projects.occ_common.utils.checkpoint_schemes'
     ckpt = _load_from_http(f'file://{zoo_checkpoint}',
                            model_dir=str(tmp_path / 'cache'))
     assert isinstance(ckpt['message_hub']['log_scalars']['train/loss'],
