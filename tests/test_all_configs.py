@@ -59,8 +59,10 @@ def test_config_builds_its_fingerprinted_model(path, fingerprints):
     assert differences(fingerprints[path], model_fingerprint(model)) == []
     cfg = Config.fromfile(osp.join(ROOT, path))
     assert 'projects.occ_common' in cfg.custom_imports['imports']
-    metric = METRICS.build(cfg.val_evaluator)
-    assert metric.default_prefix == 'occ'
+    evaluators = cfg.val_evaluator if isinstance(
+        cfg.val_evaluator, list) else [cfg.val_evaluator]
+    for evaluator in evaluators:
+        assert METRICS.build(evaluator).default_prefix == 'occ'
 
 
 @pytest.mark.parametrize('path', CONFIGS, ids=osp.basename)
