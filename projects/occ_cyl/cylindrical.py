@@ -213,10 +213,18 @@ class CylinderGrid:
             voxels, shape (U,), and each point's row among them (-1 for
             points outside), int64, the shape of ``flat``.
         """
-        voxels, rows = torch.unique(flat, return_inverse=True)
-        if voxels.numel() and int(voxels[0]) < 0:
-            return voxels[1:], rows - 1
-        return voxels, rows
+        # Points outside (-1) take a key past every voxel's, and one such
+        # key is always appended: it is always the last unique value and
+        # is cut off without reading on the host whether one occurred (a
+        # sync on GPUs).
+        past = torch.iinfo(torch.long).max
+        keys = torch.where(flat < 0, torch.full_like(flat, past), flat)
+        voxels, rows = torch.unique(
+            torch.cat([keys.reshape(-1), keys.new_full((1, ), past)]),
+            return_inverse=True)
+        rows = rows[:-1].view_as(flat)
+        return voxels[:-1], torch.where(flat < 0, torch.full_like(rows, -1),
+                                        rows)
 
     def unravel(self, flat: Tensor) -> Tensor:
         """``(b, i, j, k)`` of flat indices ``((b * R + i) * Theta + j) * Z

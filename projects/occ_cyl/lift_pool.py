@@ -34,17 +34,15 @@ from torch.autograd import Function
 from torch.autograd.function import once_differentiable
 
 from projects.occ_common.models.layers import cell_max
+from projects.occ_common.utils.device_path import check_index_range
 
 
 def _check_voxel_index(voxel_idx: Tensor, num_voxels: int) -> None:
     if voxel_idx.dtype != torch.long:
         raise ValueError('voxel indices must be int64 (-1 = outside), got '
                          f'{voxel_idx.dtype}')
-    if voxel_idx.numel() > 0:
-        lo, hi = int(voxel_idx.min()), int(voxel_idx.max())
-        if lo < -1 or hi >= num_voxels:
-            raise ValueError(f'voxel indices must lie in [-1, {num_voxels}),'
-                             f' got values in [{lo}, {hi}]')
+    check_index_range(voxel_idx, -1, num_voxels,
+                      'voxel indices (-1 = outside)')
 
 
 def voxel_max_pool(feats: Tensor, voxel_idx: Tensor,

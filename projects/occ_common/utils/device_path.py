@@ -8,6 +8,7 @@ They ask :func:`accelerator_path`. ``tools/analysis_tools/count_ops.py``
 counts a GPU's launches on the CPU under :func:`forced_accelerator_path`.
 """
 import contextlib
+import os
 from typing import Iterator, Optional
 
 import torch
@@ -66,3 +67,40 @@ def chunk_items(tensor: Tensor, bytes_per_item: int, cpu_items: int,
     else:
         free = ASSUMED_FREE_BYTES
     return max(1, int(free * share) // max(1, int(bytes_per_item)))
+
+
+#: Environment variable that makes :func:`check_index_range` read the
+#: indices on the host on GPUs too, for a clear error while debugging.
+HOST_CHECKS_ENV = 'OCC_HOST_CHECKS'
+
+
+def check_index_range(index: Tensor, low: int, high: int,
+                      what: str) -> None:
+    """Raise unless ``low <= index < high`` everywhere.
+
+    A model's own indices (voxel rows it computed) are checked as an
+    invariant. On the CPU the range is read and a violation is a
+    ``ValueError`` naming it. On the GPU path, reading it would make the
+    host wait for the device at every call, so the check is queued on the
+    device instead (``torch._assert_async``: a violation stops the process
+    with a device-side assert, as an out-of-range index in the kernel
+    itself would) unless the environment sets ``OCC_HOST_CHECKS=1``.
+
+    Args:
+        index (Tensor): Integer indices. Any shape.
+        low (int): Smallest allowed value.
+        high (int): One past the largest allowed value.
+        what (str): What the indices are, for the message.
+
+    Raises:
+        ValueError: A value outside ``[low, high)`` (host check).
+    """
+    if index.numel() == 0:
+        return
+    if accelerator_path(index) and os.environ.get(HOST_CHECKS_ENV) != '1':
+        torch._assert_async(((index >= low) & (index < high)).all())
+        return
+    lo, hi = int(index.min()), int(index.max())
+    if lo < low or hi >= high:
+        raise ValueError(f'{what} must lie in [{low}, {high}), got values '
+                         f'in [{lo}, {hi}]')

@@ -1,12 +1,17 @@
 """Majority-vote down-sampling of occupancy labels."""
+from typing import Optional
+
 import torch
 from torch import Tensor
+
+from ...utils.device_path import accelerator_path
 
 
 def downsample_occupancy_gt(gt: Tensor,
                             factor: int,
                             empty_index: int = 0,
-                            ignore_index: int = 255) -> Tensor:
+                            ignore_index: int = 255,
+                            num_classes: Optional[int] = None) -> Tensor:
     """Down-sample a label grid by a majority vote over occupied labels.
 
     Each ``factor``^3 block becomes
@@ -33,6 +38,10 @@ def downsample_occupancy_gt(gt: Tensor,
         factor (int): Down-sampling factor; X, Y and Z must be multiples.
         empty_index (int): Label of empty space. Defaults to 0.
         ignore_index (int): Label of unsupervised voxels. Defaults to 255.
+        num_classes (int, optional): C, when the caller knows it: on the
+            GPU path the vote then needs no host read of the largest label
+            (nor of the negative-label and all-ignored checks, queued on
+            the device instead). Defaults to None (read from ``gt``).
 
     Returns:
         Tensor: Labels of the same dtype and leading shape,
@@ -69,14 +78,21 @@ def downsample_occupancy_gt(gt: Tensor,
     blocks = blocks.long()
 
     ignored = blocks == ignore_index
-    if bool((~ignored & (blocks < 0)).any()):
-        raise ValueError('downsample_occupancy_gt: found negative labels '
-                         f'other than ignore_index={ignore_index}.')
-    if bool(ignored.all()):
-        result = torch.full(out_shape, ignore_index, dtype=gt.dtype,
-                            device=gt.device)
-        return result[0] if unbatched else result
-    num_slots = max(int(blocks[~ignored].max()), empty_index) + 1
+    if num_classes is not None and accelerator_path(blocks):
+        # Without host reads: the vote below gives an all-ignored block
+        # ignore_index by itself.
+        torch._assert_async((ignored | ((blocks >= 0) &
+                                        (blocks < num_classes))).all())
+        num_slots = max(int(num_classes), empty_index + 1)
+    else:
+        if bool((~ignored & (blocks < 0)).any()):
+            raise ValueError('downsample_occupancy_gt: found negative labels'
+                             f' other than ignore_index={ignore_index}.')
+        if bool(ignored.all()):
+            result = torch.full(out_shape, ignore_index, dtype=gt.dtype,
+                                device=gt.device)
+            return result[0] if unbatched else result
+        num_slots = max(int(blocks[~ignored].max()), empty_index) + 1
     # Ignored voxels are counted in an extra last slot so that one
     # scatter_add counts everything; that slot is then left out of the vote.
     slots = torch.where(ignored, torch.full_like(blocks, num_slots), blocks)

@@ -301,9 +301,9 @@ class MultiScaleOccupancyLoss(OccupancyLoss):
         terms: Dict[str, Tensor] = {}
         for level, scale_logits in enumerate(logits):
             factor = 2**level
-            scale_target = downsample_occupancy_gt(target, factor,
-                                                   self.empty_index,
-                                                   self.ignore_index)
+            scale_target = downsample_occupancy_gt(
+                target, factor, self.empty_index, self.ignore_index,
+                num_classes=scale_logits.shape[1])
             if tuple(scale_logits.shape[2:]) != tuple(scale_target.shape[1:]):
                 raise ValueError(
                     f'MultiScaleOccupancyLoss: scale {level} predicts a '

@@ -5,6 +5,7 @@ import torch
 from mmdet3d.registry import MODELS
 from torch import Tensor
 
+from ...utils.device_path import accelerator_path
 from .occupancy_loss import OccupancyLossTerm
 from .utils import SupervisedVoxels
 
@@ -169,6 +170,19 @@ class SceneClassAffinityLoss(OccupancyLossTerm):
     def _sem(self, probs: Tensor, labels: Tensor) -> Tensor:
         """Semantic term: mean over the classes present in the target."""
         own, other = self._mass(probs, labels)
+        if accelerator_path(labels):
+            # No host reads (bincount's maximum, three boolean indexes):
+            # every class's terms, absent ones masked out of the mean.
+            counts = torch.zeros(probs.shape[1], dtype=torch.long,
+                                 device=labels.device).index_add_(
+                                     0, labels, torch.ones_like(labels))
+            present = counts > 0
+            terms = self._terms(own, other,
+                                counts.clamp(min=1).to(own.dtype),
+                                labels.numel())
+            kept = torch.where(present, terms, torch.zeros_like(terms))
+            num_present = present.sum().clamp(min=1).to(terms.dtype)
+            return (kept.sum() / num_present).to(probs.dtype)
         counts = torch.bincount(labels, minlength=probs.shape[1])
         present = counts > 0
         return self._terms(own[present], other[present],

@@ -1,9 +1,12 @@
 """Input checks and flattening shared by the occupancy losses."""
+import os
 from typing import Optional, Tuple
 
 import torch
 import torch.nn.functional as F
 from torch import Tensor
+
+from ...utils.device_path import HOST_CHECKS_ENV, accelerator_path
 
 
 def flatten_logits(logits: Tensor, target: Tensor,
@@ -60,6 +63,13 @@ def check_labels(target: Tensor, num_classes: int, ignore_index: int,
     """
     valid = target != ignore_index
     bad = valid & ((target < 0) | (target >= num_classes))
+    if accelerator_path(target) and \
+            os.environ.get(HOST_CHECKS_ENV) != '1':
+        # A host read per loss and scale would make the host wait for the
+        # device; the labels were checked when loaded, so this is queued
+        # on the device (check_index_range says more).
+        torch._assert_async(~bad.any())
+        return valid
     if bool(bad.any()):
         found = torch.unique(target[bad]).tolist()
         raise ValueError(f'{loss_name}: expected labels in [0, {num_classes})'
@@ -137,6 +147,11 @@ def supervised_voxels(logits: Tensor, target: Tensor, ignore_index: int,
     flat_logits, flat_target = flatten_logits(logits, target, loss_name)
     valid = check_labels(flat_target, flat_logits.shape[1], ignore_index,
                          loss_name)
-    if not bool(valid.any()):
+    # One host read (the count, from nonzero), not three (any() and two
+    # boolean indexes).
+    rows = valid.nonzero().squeeze(1)
+    if rows.numel() == 0:
         return None
-    return SupervisedVoxels(flat_logits[valid].float(), flat_target[valid])
+    return SupervisedVoxels(
+        flat_logits.index_select(0, rows).float(),
+        flat_target.index_select(0, rows))

@@ -79,7 +79,24 @@ def test_downsample_edge_cases():
         downsample_occupancy_gt(grid - 1, 2)
 
 
-def test_multi_scale_hand_computed():
+@pytest.mark.parametrize('gpu', [False, True])
+def test_downsample_with_known_classes_is_the_same_vote(gpu):
+    """Given the class count (what the multi-scale loss passes), the GPUs'
+    path votes without host reads and gives the same labels as the vote
+    that reads the largest label, all-ignored blocks included (255)."""
+    from projects.occ_common.utils.device_path import forced_accelerator_path
+    gen = torch.Generator().manual_seed(5)
+    grid = torch.randint(0, 6, (2, 8, 8, 4), generator=gen)
+    grid[torch.rand(grid.shape, generator=gen) < 0.3] = 255
+    grid[0, :2, :2, :2] = 255
+    expected = downsample_occupancy_gt(grid, 2, empty_index=5)
+    assert expected[0, 0, 0, 0] == 255
+    with forced_accelerator_path(gpu):
+        out = downsample_occupancy_gt(grid, 2, empty_index=5, num_classes=6)
+    assert torch.equal(out, expected)
+
+
+def test_multi_scale_hand_computed(code_path):
     """Logits all 0 over C = 5 classes: p = 1/5 everywhere, so the focal
     term of every supervised voxel is (4/5)^2 ln 5 = 0.64 * 1.6094379
     = 1.0300403, whatever the label. Scale 0 (4^3 GT) averages it: 1.0300403;
@@ -111,7 +128,7 @@ def test_multi_scale_hand_computed():
     assert all(torch.isfinite(x.grad).all() for x in logits)
 
 
-def test_multi_scale_all_ignored_is_finite():
+def test_multi_scale_all_ignored_is_finite(code_path):
     """An all-ignored GT gives zero terms and zero gradients."""
     gt = torch.full((1, 4, 4, 2), 255)
     logits = [
@@ -178,7 +195,7 @@ def test_term_name():
     assert term_name(MyThingLoss()) == 'loss_my_thing'
 
 
-def test_terms_share_one_selection_and_softmax(monkeypatch):
+def test_terms_share_one_selection_and_softmax(monkeypatch, code_path):
     """The composed loss selects the supervised voxels and takes their
     softmax once per scale for all its terms (the terms used to do both
     each: 4 softmaxes a scale), and every term's value and the gradient of

@@ -25,7 +25,7 @@ def _three_class_voxels():
     return logits, target
 
 
-def test_sem_hand_computed():
+def test_sem_hand_computed(code_path):
     """Mean over the classes present (0 and 1); class 2 is skipped.
 
     class 0: t = (0, 1, 0), p = (0.25, 0.5, 0.25)
@@ -89,7 +89,7 @@ def test_geo_all_empty_batch_is_finite():
     assert torch.isfinite(logits.grad).all()
 
 
-def test_sem_all_empty_batch_is_finite():
+def test_sem_all_empty_batch_is_finite(code_path):
     """Only class 0 present, p0 = 0.5 on both voxels.
 
     P = 1.0 / 1.0 = 1, R = 1.0 / 2 = 0.5, S = (0 + eps) / (0 + eps) = 1
@@ -104,7 +104,7 @@ def test_sem_all_empty_batch_is_finite():
 
 
 @pytest.mark.parametrize('mode', ['geo', 'sem'])
-def test_all_ignored_is_zero(mode):
+def test_all_ignored_is_zero(mode, code_path):
     """Every voxel ignored: 0 with zero gradients, inputs unchanged."""
     logits = torch.randn(1, 3, 2, 2, 1, requires_grad=True)
     target = torch.full((1, 2, 2, 1), 255)
@@ -129,7 +129,7 @@ def test_bad_config_and_inputs_raise():
     assert SceneClassAffinityLoss(mode='sem').loss_name == 'loss_sem_scal'
 
 
-def test_sem_matches_per_class_loop_with_gradients():
+def test_sem_matches_per_class_loop_with_gradients(code_path):
     """The all-classes-at-once semantic term equals MonoScene's loop.
 
     Reference: for every class c present in the target, the three terms of
