@@ -13,6 +13,7 @@ from projects.occ_common.models.layers import (cartesian_to_cylindrical,
                                                create_frustum,
                                                cylindrical_to_cartesian,
                                                frustum_to_lidar)
+from projects.occ_common.utils.device_path import accelerator_path
 
 __all__ = [
     'CylinderGrid', 'cartesian_to_cylindrical', 'cylindrical_to_cartesian',
@@ -213,10 +214,15 @@ class CylinderGrid:
             voxels, shape (U,), and each point's row among them (-1 for
             points outside), int64, the shape of ``flat``.
         """
-        # Points outside (-1) take a key past every voxel's, and one such
-        # key is always appended: it is always the last unique value and
-        # is cut off without reading on the host whether one occurred (a
-        # sync on GPUs).
+        if not accelerator_path(flat):
+            voxels, rows = torch.unique(flat, return_inverse=True)
+            if voxels.numel() and int(voxels[0]) < 0:
+                return voxels[1:], rows - 1
+            return voxels, rows
+        # GPUs: points outside (-1) take a key past every voxel's, and one
+        # such key is always appended: it is always the last unique value
+        # and is cut off without reading on the host whether one occurred
+        # (a sync). On the CPU the extra passes cost ~1.5x the unique.
         past = torch.iinfo(torch.long).max
         keys = torch.where(flat < 0, torch.full_like(flat, past), flat)
         voxels, rows = torch.unique(

@@ -157,7 +157,7 @@ def test_for_box_inscribed_is_pointocc_cylinder():
         CylinderGrid.for_box(box, (8, 8, 8), 'outer')
 
 
-def test_occupied_compacts_and_unravel_inverts():
+def test_occupied_compacts_and_unravel_inverts(code_path):
     """Flat indices (21, -1, 0, 21, 53) of the (4, 4, 2) grid: occupied
     voxels (0, 21, 53) and rows (1, -1, 0, 1, 2); 53 = 32 + 21 is voxel
     (2, 2, 1) of sample 1 -> (b, i, j, k) = (1, 2, 2, 1)."""
