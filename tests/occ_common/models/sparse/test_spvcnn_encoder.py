@@ -290,7 +290,8 @@ def test_spconv_and_torch_backends_agree():
     dict(point_offsets=True),
     dict(stage_strides=(2, 2), bev_shape=(2, 2), bev_reduce='mean')
 ])
-def test_forward_and_gradients_match_point_by_point_reference(kwargs, code_path):
+def test_forward_and_gradients_match_point_by_point_reference(
+        kwargs, code_path):
     """The shared corner lookups, the per-voxel parent lookups, the in-place
     sum and (in eval) the folded point MLPs give the BEV and, in training,
     the parameter gradients of the layers applied point by point
