@@ -65,6 +65,12 @@ DELTAS = {
         'occ_head.loss_occ.losses[2].type', 'occ_head.loss_occ.losses[2].mode'
     }),
     KL: (FUSION, KL_KEYS),
+    # RayIoU (issue 49): the Occ3D configs trained on whole grids.
+    FUSION.replace('occ3d-nus', 'occ3d-nus-nomask'): (FUSION,
+                                                      {'loss_mask_key'}),
+    KL.replace('occ3d-nus', 'occ3d-nus-nomask'): (KL, {'loss_mask_key'}),
+    TINY_FUSION.replace('occ3d-nus', 'occ3d-nus-nomask'): (TINY_FUSION,
+                                                           {'loss_mask_key'}),
     _main('kl', 'surroundocc-nus'): (FUSION_SOCC, KL_KEYS),
     _tiny('kl'): (TINY_FUSION, KL_KEYS),
     # The learning benchmark's small configs: the tiny model with sweeps

@@ -82,13 +82,19 @@ def coupled_value_mismatches(cfg: Config, project: str) -> List[str]:
     """
     model = cfg.model
     empty = 'free' if cfg.occ_format == 'occ3d' else 'empty'
+    evaluators = cfg.val_evaluator if isinstance(
+        cfg.val_evaluator, list) else [cfg.val_evaluator]
+    voxel_metric = next(e for e in evaluators if e.type == 'OccupancyMetric')
+    # A config scored with RayIoU trains on whole grids (SparseOcc's
+    # advice for a fair RayIoU), whatever mask its voxel metric uses.
+    ray_scored = any(e.type == 'OccRayIoUMetric' for e in evaluators)
     expected = dict(
         point_cloud_range=cfg.point_cloud_range,
         voxel_size=cfg.voxel_size,
         num_classes=len(cfg.class_names),
         empty_index=cfg.class_names.index(empty),
         loss_mask_key='mask_camera'
-        if cfg.val_evaluator.use_camera_mask else None)
+        if voxel_metric.use_camera_mask and not ray_scored else None)
     out = [
         f'model.{key} = {model.get(key)!r}, dataset: {value!r}'
         for key, value in expected.items() if model.get(key) != value
