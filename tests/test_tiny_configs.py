@@ -28,11 +28,38 @@ def synthetic_root(tmp_path_factory):
 
 
 def test_every_model_has_a_tiny_config():
-    """OccCylindrical, SDG-Fusion (single-frame and over two key
-    frames) and SDG-KL."""
-    assert [osp.basename(p).split('_')[0] for p in TINY] == [
-        'occcyl', 'sdgocc-fusion-2f', 'sdgocc-fusion', 'sdgocc-kl'
+    """OccCylindrical, SDG-Fusion (single-frame, over two key frames, and
+    trained without the camera mask, scored with RayIoU) and SDG-KL."""
+    assert [osp.basename(p)[:-3] for p in TINY] == [
+        'occcyl_tiny_1xb1-6e_surroundocc-nus-synthetic',
+        'sdgocc-fusion-2f_tiny_1xb1-6e_occ3d-nus-synthetic',
+        'sdgocc-fusion_tiny_1xb1-6e_occ3d-nus-nomask-synthetic',
+        'sdgocc-fusion_tiny_1xb1-6e_occ3d-nus-synthetic',
+        'sdgocc-kl_tiny_1xb1-6e_occ3d-nus-synthetic',
     ]
+
+
+def data_root_options(path, root):
+    """``--cfg-options`` that point a config's datasets, and the evaluators
+    that read an info file themselves (RayIoU's origins), at ``root``."""
+    cfg = Config.fromfile(path)
+    options = [
+        f'{split}_dataloader.dataset.data_root={root}'
+        for split in ('train', 'val', 'test')
+    ]
+    for split in ('val', 'test'):
+        evaluators = cfg[f'{split}_evaluator']
+        if isinstance(evaluators, dict):
+            evaluators = [evaluators]
+            keys = [f'{split}_evaluator']
+        else:
+            keys = [f'{split}_evaluator.{i}' for i in range(len(evaluators))]
+        options += [
+            f'{key}.data_root={root}'
+            for key, evaluator in zip(keys, evaluators)
+            if 'data_root' in evaluator
+        ]
+    return options
 
 
 @pytest.mark.slow
@@ -40,11 +67,9 @@ def test_every_model_has_a_tiny_config():
 def test_tiny_config_trains_and_tests(path, synthetic_root, tmp_path):
     """The loss falls over 4 epochs of 2 samples (the mean of the last two
     iterations is below that of the first two) and tools/test.py reports
-    IoU and mIoU through OccupancyMetric."""
-    data = [
-        f'{split}_dataloader.dataset.data_root={synthetic_root}'
-        for split in ('train', 'val', 'test')
-    ]
+    IoU and mIoU through OccupancyMetric, and RayIoU where the config asks
+    for it."""
+    data = data_root_options(path, synthetic_root)
     work_dir = str(tmp_path / 'work')
     proc = run_tool('tools/train.py', path, '--work-dir', work_dir,
                     '--cfg-options', 'train_cfg.max_epochs=4',
@@ -72,3 +97,13 @@ def test_tiny_config_trains_and_tests(path, synthetic_root, tmp_path):
     assert metrics['occ/mIoU'] == pytest.approx(
         mean_of_class_ious(metrics, names), abs=1e-3)
     assert 0.0 <= metrics['occ/IoU'] < 100.0
+    evaluators = cfg.test_evaluator
+    if isinstance(evaluators, dict):
+        evaluators = [evaluators]
+    if any(e['type'] == 'OccRayIoUMetric' for e in evaluators):
+        # The classes scored at every threshold are the same (a class is
+        # left out where neither GT nor prediction has a ray of it), so
+        # the overall value is the mean of the three thresholds'.
+        at = [metrics[f'occ/RayIoU@{tau}'] for tau in (1, 2, 4)]
+        assert metrics['occ/RayIoU'] == pytest.approx(sum(at) / 3, abs=1e-3)
+        assert 0.0 <= min(at) and max(at) <= 100.0
