@@ -6,8 +6,12 @@ the script itself imports only helpers of ``projects.occ_common.utils``
 1.4's script; ``--cfg-options`` and the config's top-level keys are
 checked first (``config_checks``; an override of the wrong kind ends the
 run with one line and exit status 2), and ``--resume`` resumes from the
-newest complete checkpoint of the work dir even without a
+complete checkpoint of the latest step of the work dir even without a
 ``last_checkpoint`` pointer (``CheckpointRecoveryHook`` of the configs).
+The script adds ``CheckpointMatchHook``: a ``load_from`` checkpoint whose
+keys or shapes differ from the model's is refused unless
+``--allow-key-mismatch``, and a ``--resume`` checkpoint of another model
+always, each naming the file and the first mismatched keys.
 """
 import argparse
 import logging
@@ -69,6 +73,12 @@ def parse_args(argv=None):
         choices=['none', 'pytorch', 'slurm', 'mpi'],
         default='none',
         help='job launcher')
+    parser.add_argument(
+        '--allow-key-mismatch',
+        action='store_true',
+        help='fine-tune from a load_from checkpoint whose keys or shapes '
+        "differ from the model's (missing ones keep their initialisation); "
+        'refused by default, and always for --resume')
     # torch.distributed.launch passes --local-rank; torchrun sets LOCAL_RANK.
     parser.add_argument('--local_rank', '--local-rank', type=int, default=0)
     args = parser.parse_args(argv)
@@ -123,6 +133,13 @@ def build_cfg(args) -> Config:
     elif args.resume is not None:
         cfg.resume = True
         cfg.load_from = args.resume
+    # Registered by projects.occ_common (the config's custom_imports).
+    cfg.custom_hooks = list(cfg.get('custom_hooks', None) or []) + [
+        dict(
+            type='CheckpointMatchHook',
+            allow_key_mismatch=args.allow_key_mismatch,
+            training=True)
+    ]
     return cfg
 
 

@@ -33,6 +33,10 @@ custom_hooks = [
     # Seeds each sample's random augmentation by (seed, epoch, index), so a
     # resumed run repeats an uninterrupted one exactly.
     dict(type='AugmentationSeedHook'),
+    # Saves the global random state (torch CPU / CUDA, numpy, Python) of
+    # every rank in each checkpoint and restores it on --resume, so that
+    # DropPath and dropout draw what an uninterrupted run draws.
+    dict(type='RandomStateHook'),
 ]
 
 # Where the Runner's pictures and scalars go; mmdet3d's

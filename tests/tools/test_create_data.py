@@ -12,8 +12,10 @@ import shutil
 
 import mmengine
 import pytest
+from PIL import Image
 
 from projects.occ_common.testing.tool_logs import run_create_data
+from projects.occ_common.transforms import LoadMultiViewImagesOcc
 from projects.occ_common.utils.safe_pickle import load_info_file
 
 pytestmark = pytest.mark.filterwarnings(
@@ -131,9 +133,12 @@ def test_missing_key_frame_still_stops(world_copy):
 
 def test_extend_mmdet3d_info_file(world_copy, tmp_path):
     """An mmdet3d v2 info file of the world (bare file names as mmdet3d
-    writes them, sweeps as data/nuscenes/sweeps/... paths, no scene keys)
-    is extended to exactly the entries our converter wrote: the same
-    paths below the root, matrices, scene (from the tables), labels."""
+    writes them, sweeps as data/nuscenes/sweeps/... paths, no scene keys,
+    no image sizes) is extended to exactly the entries our converter
+    wrote: the same paths below the root, matrices, scene (from the
+    tables), labels, and image height / width (read from the files;
+    before, they were not recorded, and a view resized after the
+    conversion loaded without an error)."""
     ours = _infos(world_copy)['data_list']
     theirs = []
     for e in ours:
@@ -196,7 +201,26 @@ def test_extend_mmdet3d_info_file(world_copy, tmp_path):
         assert [s['lidar_points']['lidar_path'] for s in got['lidar_sweeps']
                 ] == [s['lidar_points']['lidar_path']
                       for s in want['lidar_sweeps']]
-        assert {c: i['img_path'] for c, i in got['images'].items()} == {
-            c: i['img_path'] for c, i in want['images'].items()}
+        for key in ('img_path', 'height', 'width'):
+            assert {c: i[key] for c, i in got['images'].items()} == {
+                c: i[key] for c, i in want['images'].items()}, key
     assert json.dumps(extended['metainfo']['classes']) == json.dumps(
         _infos(world_copy)['metainfo']['classes'])
+
+    # A view resized by 0.8 after the conversion: refused when loaded,
+    # naming the sample and the camera.
+    sample = extended['data_list'][0]
+    images = {
+        cam: dict(info, img_path=osp.join(world_copy, info['img_path']))
+        for cam, info in sample['images'].items()
+    }
+    front = images['CAM_FRONT']['img_path']
+    with Image.open(front) as img:
+        img.resize((img.width * 4 // 5, img.height * 4 // 5)).save(
+            front, format=img.format)
+    with pytest.raises(ValueError,
+                       match=re.escape(
+                           f'sample {sample["token"]} CAM_FRONT: image '
+                           f'{front} is 128x72, but its calibration')):
+        LoadMultiViewImagesOcc().transform(
+            dict(token=sample['token'], images=images))

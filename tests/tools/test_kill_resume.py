@@ -18,16 +18,28 @@ accumulates in thread order otherwise, so that even two uninterrupted runs
 of this config differ in about 200 tensors by float rounding (measured
 with 2 threads; the first step's gradients already differ between two
 processes, never within one).
+
+OccCylindrical adds random layers: DropPath in its TPV Swin encoder draws
+from torch's global generator, whose state a checkpoint did not hold, so a
+resume from epoch 1 drew other masks from its first iteration (284 of 417
+tensors differed after one more iteration). ``RandomStateHook`` now saves
+and restores that state. Its test resumes in this process from the
+uninterrupted run's epoch_1.pth (the kill itself is what the SDG-Fusion
+test covers) on one sample, so that two epochs are two iterations.
 """
 import os
 import os.path as osp
+import shutil
 import signal
 import subprocess
 import sys
 import time
+import uuid
 
 import pytest
 import torch
+from mmengine.config import Config
+from mmengine.runner import Runner
 
 from projects.occ_common.utils import load_checkpoint_file
 
@@ -110,4 +122,61 @@ def test_sigkill_then_resume_matches_an_uninterrupted_run(
     assert list(resumed) == list(expected)
     differ = [name for name, tensor in expected.items()
               if not torch.equal(resumed[name], tensor)]
+    assert differ == [], f'{len(differ)} of {len(expected)} differ'
+
+
+OCCCYL = osp.join(ROOT, 'configs', 'occ_cyl',
+                  'occcyl_tiny_1xb1-6e_surroundocc-nus-synthetic.py')
+
+
+def _occcyl_cfg(work_dir, data_root, resume_from=None):
+    cfg = Config.fromfile(OCCCYL)
+    # No yapf formatting of the config text: ~1.7 s each of the 11 times
+    # the two Runners log, dump or save it (mmengine 0.10.7's fromfile
+    # ignores its format_python_code argument).
+    object.__setattr__(cfg, '_format_python_code', False)
+    cfg.merge_from_dict({
+        'train_cfg.max_epochs': EPOCHS,
+        'train_cfg.val_begin': 100,
+        'default_hooks.checkpoint.interval': 1,
+        'default_hooks.checkpoint.max_keep_ckpts': EPOCHS,
+        'randomness.seed': 0,
+        'randomness.deterministic': True,
+        'train_dataloader.dataset.indices': 1,
+        **{
+            f'{split}_dataloader.dataset.data_root': data_root
+            for split in ('train', 'val', 'test')
+        }
+    })
+    cfg.work_dir = str(work_dir)
+    cfg.experiment_name = f'occcyl_resume_{uuid.uuid4().hex}'
+    if resume_from is not None:
+        cfg.resume, cfg.load_from = True, str(resume_from)
+    return cfg
+
+
+@pytest.mark.slow
+def test_occcyl_resume_repeats_droppath(converted_tiny_world, tmp_path):
+    """OccCylindrical (DropPath 0.1), one sample an epoch: resumed from
+    epoch_1.pth, every tensor of epoch_2.pth equals the uninterrupted
+    run's."""
+    data_root = converted_tiny_world.rstrip('/') + '/'
+    deterministic = torch.are_deterministic_algorithms_enabled()
+    try:
+        straight = tmp_path / 'straight'
+        Runner.from_cfg(_occcyl_cfg(straight, data_root)).train()
+        resumed = tmp_path / 'resumed'
+        resumed.mkdir()
+        shutil.copy(straight / 'epoch_1.pth', resumed / 'epoch_1.pth')
+        Runner.from_cfg(
+            _occcyl_cfg(resumed, data_root,
+                        resumed / 'epoch_1.pth')).train()
+    finally:
+        torch.use_deterministic_algorithms(deterministic)
+    final = f'epoch_{EPOCHS}.pth'
+    expected = _state_dict(straight / final)
+    got = _state_dict(resumed / final)
+    assert list(got) == list(expected)
+    differ = [name for name, tensor in expected.items()
+              if not torch.equal(got[name], tensor)]
     assert differ == [], f'{len(differ)} of {len(expected)} differ'

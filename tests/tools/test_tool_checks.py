@@ -275,3 +275,67 @@ def test_bad_checkpoint_files_through_test_and_resume(
             _name()
         ])
     assert not marker.exists()
+
+
+def _other_model(state):
+    """The toy model's checkpoint with its classifier renamed and resized,
+    as another model's would be."""
+    state['head.weight'] = state.pop('classifier.weight')
+    state['classifier.bias'] = torch.zeros(5)
+
+
+def _train(tmp_path, *extra, options=()):
+    train_tool.main([
+        CONFIG, '--work-dir',
+        str(tmp_path / uuid.uuid4().hex), *extra, '--cfg-options',
+        'train_cfg.max_epochs=1', 'train_cfg.val_interval=100', _name(),
+        *options
+    ])
+
+
+def test_load_from_another_model_is_refused(toy_checkpoint, tmp_path):
+    """load_from= the other model's checkpoint: refused, naming the file
+    and the first mismatched keys (before: it trained from random weights
+    with two warning lines), unless --allow-key-mismatch (fine-tuning a
+    model whose head differs)."""
+    path = _modified(toy_checkpoint, tmp_path, _other_model)
+    with pytest.raises(ValueError) as err:
+        _train(tmp_path, options=[f'load_from={path}'])
+    message = str(err.value)
+    assert message.startswith(f'{path} does not fit the model of {CONFIG}')
+    assert "tensors are missing (classifier.weight)" in message
+    assert 'Training from it would start' in message
+    assert '--allow-key-mismatch to tools/train.py' in message
+    _train(tmp_path, '--allow-key-mismatch',
+           options=[f'load_from={_modified(toy_checkpoint, tmp_path, dict)}'])
+
+
+def test_resume_with_another_model_names_the_file(toy_checkpoint,
+                                                  tmp_path):
+    """--resume with the other model's checkpoint: refused before its
+    weights are loaded, naming the file, --allow-key-mismatch or not.
+    Before, mmengine loaded the weights that fit and logged the others;
+    here (the optimizer state still fits the toy's two parameters) the run
+    then went on, and between the two paper models the optimizer failed
+    without naming the file."""
+    path = _modified(toy_checkpoint, tmp_path, _other_model)
+    for extra in ([], ['--allow-key-mismatch']):
+        with pytest.raises(ValueError,
+                           match=f'--resume: {re.escape(path)} does not fit'
+                           '.* resumes only from a checkpoint of its own'):
+            _train(tmp_path, '--resume', path, *extra)
+
+
+def test_env_cfg_typo_is_refused():
+    """env_cfg.cudnn_benchmak (and an mp_cfg typo) were silently
+    ignored by mmengine's Runner.setup_env."""
+    args = train_tool.parse_args(
+        [CONFIG, '--cfg-options', 'env_cfg.cudnn_benchmak=True'])
+    with pytest.raises(ValueError,
+                       match=r"unknown key in env_cfg: 'cudnn_benchmak' "
+                       r"\(did you mean 'cudnn_benchmark'\?\)"):
+        train_tool.build_cfg(args)
+    args = test_tool.parse_args(
+        [CONFIG, 'x.pth', '--cfg-options', 'env_cfg.mp_cfg.start=fork'])
+    with pytest.raises(ValueError, match=r"env_cfg.mp_cfg: 'start'"):
+        test_tool.build_cfg(args)

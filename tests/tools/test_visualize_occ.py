@@ -12,6 +12,7 @@ import torch
 from PIL import Image
 
 from projects.occ_common.testing.tool_logs import load_tool
+from projects.occ_common.utils import load_checkpoint_file
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ.py')
@@ -212,6 +213,27 @@ def test_from_config_checkpoint_and_index(tmp_path):
                    str(tmp_path / 'x.png')])
     with pytest.raises(SystemExit):
         tool.parse_args(['--config', CONFIG, '--out', 'x.png'])
+
+
+def test_checkpoint_of_another_model_is_refused(tmp_path):
+    """Another model's checkpoint (renamed classifier): refused, naming
+    the file and the key (before: logger='silent' loaded nothing of it
+    and drew a randomly initialised model), unless --allow-key-mismatch."""
+    _toy_checkpoint(tmp_path / 'toy.pth')
+    checkpoint = load_checkpoint_file(str(tmp_path / 'toy.pth'))
+    state = checkpoint['state_dict']
+    state['head.weight'] = state.pop('classifier.weight')
+    other = str(tmp_path / 'other.pth')
+    torch.save(checkpoint, other)
+    tool = load_tool('tools/misc/visualize_occ.py')
+    argv = ['--config', CONFIG, '--checkpoint', other, '--out',
+            str(tmp_path / 'x.png'), '--view-size', '40', '60']
+    with pytest.raises(ValueError, match=r'other\.pth does not fit the model'
+                       r'.*missing \(classifier.weight\).*'
+                       '--allow-key-mismatch'):
+        tool.main(argv)
+    tool.main(argv + ['--allow-key-mismatch'])
+    assert osp.isfile(tmp_path / 'x.png')
 
 
 def test_cfg_options_of_the_wrong_kind_end_in_one_line(tmp_path, capsys):

@@ -37,6 +37,10 @@ def parse_args(argv=None):
     parser.add_argument('--max-samples', type=int, default=None,
                         help='measure only the first N samples')
     parser.add_argument('--device', default='cpu')
+    parser.add_argument(
+        '--allow-key-mismatch', action='store_true',
+        help="measure a checkpoint whose keys or shapes differ from the "
+        "model's (missing ones keep their initialisation)")
     parser.add_argument('--json', default=None, help='write the numbers')
     parser.add_argument('--cfg-options', nargs='+', action=DictAction,
                         help='config overrides, as for tools/test.py')
@@ -52,8 +56,9 @@ def build(args):
     """
     from projects.occ_common.utils import build_trained_model
 
-    cfg, model = build_trained_model(args.config, args.checkpoint,
-                                     args.cfg_options, args.device)
+    cfg, model = build_trained_model(
+        args.config, args.checkpoint, args.cfg_options, args.device,
+        allow_key_mismatch=getattr(args, 'allow_key_mismatch', False))
     return model, build_split_dataset(cfg, args.split, args.data_root)
 
 

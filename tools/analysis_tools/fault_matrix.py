@@ -168,6 +168,132 @@ def _foreign_zip(folder, marker):
     return path
 
 
+def _copied_work_dir(folder, marker):
+    """epoch_1..3.pth as ``cp`` leaves them (epoch_1.pth copied last: the
+    newest file time), the pointer on epoch_3.pth."""
+    for step in (1, 2, 3):
+        path = osp.join(folder, f'epoch_{step}.pth')
+        torch.save(dict(meta=dict(epoch=step, iter=step), state_dict={}),
+                   path)
+        os.utime(path, (4e6 - step * 1e6, ) * 2)
+    with open(osp.join(folder, 'last_checkpoint'), 'w') as f:
+        f.write(osp.join(folder, 'epoch_3.pth'))
+    return osp.join(folder, 'epoch_1.pth')
+
+
+def _auto_resume_target(path):
+    """tools/train.py --resume in the copied work dir: the pointer must
+    still name the latest step (else: data loss, an error naming none)."""
+    from projects.occ_common.hooks.checkpoint_recovery_hook import \
+        repair_work_dir
+    folder = osp.dirname(path)
+    repair_work_dir(folder)
+    with open(osp.join(folder, 'last_checkpoint')) as f:
+        target = f.read()
+    if not target.endswith('epoch_3.pth'):
+        raise RuntimeError('--resume went back in time')
+    return target
+
+
+def _resume_before_later_steps(path):
+    """tools/train.py --resume epoch_1.pth next to epoch_2/3.pth."""
+    from projects.occ_common.hooks.checkpoint_recovery_hook import \
+        check_no_later_checkpoint
+    return check_no_later_checkpoint(osp.dirname(path), path)
+
+
+def _rng_checkpoint(folder, marker):
+    """A checkpoint of RandomStateHook (ByteTensor, numpy, Python)."""
+    from projects.occ_common.hooks.random_state_hook import get_random_state
+    path = osp.join(folder, 'rng.pth')
+    torch.save(dict(meta={}, rng_state=dict(
+        world_size=1, ranks=[get_random_state()])), path)
+    return path
+
+
+def _points(layout):
+    """A LiDAR key frame of nuScenes points written as ``layout``."""
+    rows = np.array([[12.345, -3.21, 0.875, 17, 3], [-40.5, 7.1, -1.6, 2, 31]])
+
+    def made(folder, marker):
+        path = osp.join(folder, 'key.pcd.bin')
+        if layout == 'float64':
+            rows.tofile(path)
+        elif layout == '4 values a point':
+            np.tile(rows, (3, 1))[:5, :4].astype(np.float32).tofile(path)
+        else:  # all NaN
+            np.full((2, 5), np.nan, np.float32).tofile(path)
+        return path
+
+    return made
+
+
+def _load_points(path):
+    """LoadOccPointsFromFile; an all-NaN frame must be dropped with a
+    warning naming the file (else a silent drop: an error naming none)."""
+    import warnings
+
+    import projects.occ_common.transforms  # noqa: F401  (registers)
+    from projects.occ_common.transforms.points_loading import \
+        LoadOccPointsFromFile
+    load = LoadOccPointsFromFile(coord_type='LIDAR', load_dim=5, use_dim=5)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter('always')
+        points = load(dict(lidar_points=dict(lidar_path=path)))['points']
+    if not any(path in str(w.message) for w in caught) and len(points) < 5:
+        raise RuntimeError('points dropped without a word')
+    return points
+
+
+def _info(edit):
+    """An info file of the converter's layout, changed by ``edit``."""
+
+    def made(folder, marker):
+        from projects.occ_common.datasets.info_format import (
+            INFO_VERSION, REQUIRED_SAMPLE_KEYS)
+        entries = [{key: None for key in REQUIRED_SAMPLE_KEYS}
+                   for _ in range(2)]
+        for i, entry in enumerate(entries):
+            entry['token'] = f'token{i}'
+        infos = dict(metainfo=dict(info_version=INFO_VERSION),
+                     data_list=entries)
+        edit(infos)
+        path = osp.join(folder, 'infos.pkl')
+        with open(path, 'wb') as f:
+            pickle.dump(infos, f, protocol=2)
+        return path
+
+    return made
+
+
+def _check_info(path):
+    """What NuScenesOccDataset checks first."""
+    from projects.occ_common.datasets.info_format import check_info_file
+    return check_info_file(load_info_file(path), path)
+
+
+def _bool_semantics(folder, marker):
+    path = osp.join(folder, 'labels.npz')
+    grid = np.zeros((200, 200, 16), np.uint8)
+    np.savez(path, semantics=grid.astype(bool), mask_lidar=grid,
+             mask_camera=grid)
+    return path
+
+
+def _load_occ3d(path):
+    import projects.occ_common.transforms  # noqa: F401  (registers)
+    from projects.occ_common.transforms.loading import LoadOccupancyGT
+    return LoadOccupancyGT('occ3d')(dict(occ_path=path))
+
+
+def _other_model(folder, marker):
+    """The toy model's checkpoint with another head, as another model's."""
+    path = osp.join(folder, 'other_model.pth')
+    torch.save(dict(meta={}, state_dict={'head.weight': torch.ones(3, 3)}),
+               path)
+    return path
+
+
 _ZOO = 'https://download.openmmlab.com/pretrain/third_party/' \
     'resnet50_msra-5891d200.pth'
 _CLEAR, _HANDLED = 'clear error', 'handled'
@@ -222,6 +348,39 @@ CASES: List[Case] = [
          _valid_checkpoint(False), load_checkpoint_file),
     Case('valid info file with numpy objects', _HANDLED, _valid_info,
          load_info_file),
+    # Issue 48, items 4-7: data loss, silent input, unclear errors.
+    Case('work dir copied with cp (file times reversed): --resume',
+         _HANDLED, _copied_work_dir, _auto_resume_target),
+    Case('--resume epoch_1.pth next to epoch_2/3.pth', _CLEAR,
+         _copied_work_dir, _resume_before_later_steps),
+    Case('checkpoint with a random state (ByteTensor)', _HANDLED,
+         _rng_checkpoint, load_checkpoint_file),
+    *(Case(f'LiDAR key frame of {layout}', expected, _points(layout),
+           _load_points)
+      for layout, expected in (('float64', _CLEAR),
+                               ('4 values a point', _CLEAR),
+                               ('all NaN', _HANDLED))),
+    Case('info file listing a sample twice', _CLEAR,
+         _info(lambda i: i['data_list'].append(i['data_list'][0])),
+         _check_info),
+    Case('info file with a sample that is not a dict', _CLEAR,
+         _info(lambda i: i['data_list'].append(['token2'])), _check_info),
+    Case('info file whose metainfo is a list', _CLEAR,
+         _info(lambda i: i.update(metainfo=list(i['metainfo'].items()))),
+         _check_info),
+    Case('boolean Occ3D semantics', _CLEAR, _bool_semantics, _load_occ3d),
+    Case('checkpoint of another model: tools/train.py load_from=', _CLEAR,
+         _other_model,
+         _tool('tools/train.py', CONFIG, '--work-dir', '{work}',
+               '--cfg-options', 'load_from={path}')),
+    Case('checkpoint of another model: tools/train.py --resume PATH',
+         _CLEAR, _other_model,
+         _tool('tools/train.py', CONFIG, '--work-dir', '{work}', '--resume',
+               '{path}')),
+    Case('checkpoint of another model: tools/misc/visualize_occ.py', _CLEAR,
+         _other_model,
+         _tool('tools/misc/visualize_occ.py', '--config', CONFIG,
+               '--checkpoint', '{path}', '--out', '{work}.png')),
 ]
 if osp.isfile(REAL_INFO):
     CASES.append(

@@ -59,6 +59,12 @@ def parse_args(argv=None):
         '--save-pred', help='also store pred / GT / mask in this .npz')
     model.add_argument('--device', default='cpu', help='e.g. cpu, cuda:0')
     model.add_argument(
+        '--allow-key-mismatch',
+        action='store_true',
+        help='draw with a checkpoint whose keys or shapes differ from the '
+        "model's (missing ones keep their initialisation); refused by "
+        'default')
+    model.add_argument(
         '--cfg-options',
         nargs='+',
         action=CfgOptionsAction,
@@ -219,7 +225,7 @@ def predict_sample(args):
 
     cfg, model = build_trained_model(
         args.config, args.checkpoint, args.cfg_options, args.device,
-        getattr(args, 'cfg_options_raw', None))
+        getattr(args, 'cfg_options_raw', None), args.allow_key_mismatch)
     dataset = DATASETS.build(cfg.test_dataloader.dataset)
     if not 0 <= args.index < len(dataset):
         raise ValueError(f'--index {args.index} is outside the test set of '

@@ -46,9 +46,11 @@ def check_info_file(infos: Mapping, path: str) -> None:
         path (str): Its file name, for the error message.
 
     Raises:
-        ValueError: If the layout is not ``dict(metainfo, data_list)``, the
-            ``info_version`` differs from :data:`INFO_VERSION`, or a sample
-            lacks one of :data:`REQUIRED_SAMPLE_KEYS`.
+        ValueError: If the layout is not ``dict(metainfo, data_list)``
+            (``metainfo`` a dict, ``data_list`` a list of dicts), the
+            ``info_version`` differs from :data:`INFO_VERSION`, a sample
+            lacks one of :data:`REQUIRED_SAMPLE_KEYS`, or a sample token
+            appears twice (it would be trained on and evaluated twice).
     """
     if not isinstance(infos, Mapping) or 'data_list' not in infos \
             or 'metainfo' not in infos:
@@ -57,6 +59,15 @@ def check_info_file(infos: Mapping, path: str) -> None:
             f' written by tools/create_data.py, got {type(infos).__name__}'
             f' with keys {sorted(infos) if isinstance(infos, Mapping) else []}'
         )
+    if not isinstance(infos['metainfo'], Mapping):
+        raise ValueError(
+            f'{path}: metainfo must be a dict (of info_version, classes, '
+            f'...), got {type(infos["metainfo"]).__name__} '
+            f'{infos["metainfo"]!r:.60}')
+    if not isinstance(infos['data_list'], list):
+        raise ValueError(
+            f'{path}: data_list must be a list of samples, got '
+            f'{type(infos["data_list"]).__name__}')
     found = infos['metainfo'].get('info_version')
     if found != INFO_VERSION:
         raise ValueError(
@@ -64,12 +75,26 @@ def check_info_file(infos: Mapping, path: str) -> None:
             f'{INFO_VERSION!r}; the file comes from another converter or an '
             'older version of it. Re-create it with tools/create_data.py '
             '--overwrite.')
-    for entry in infos['data_list']:
+    first_index = {}
+    for index, entry in enumerate(infos['data_list']):
+        if not isinstance(entry, Mapping):
+            raise ValueError(
+                f'{path}: sample {index} of data_list is a '
+                f'{type(entry).__name__} ({entry!r:.60}), not a dict of '
+                'sample keys')
         missing = [k for k in REQUIRED_SAMPLE_KEYS if k not in entry]
         if missing:
             raise ValueError(
                 f'{path}: sample {entry.get("token", "?")} lacks the keys '
                 f'{missing} of info_version {INFO_VERSION!r}')
+        token = entry['token']
+        if token in first_index:
+            raise ValueError(
+                f'{path}: sample {token} appears twice in data_list (at '
+                f'{first_index[token]} and {index}): it would be trained '
+                'on and evaluated twice. Re-create the info file with '
+                'tools/create_data.py --overwrite.')
+        first_index[token] = index
 
 
 def as_matrix(value,

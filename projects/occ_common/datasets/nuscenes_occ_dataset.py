@@ -3,6 +3,7 @@ import copy
 import os.path as osp
 from typing import Callable, Dict, List, Optional, Sequence, Union
 
+import numpy as np
 from mmdet3d.registry import DATASETS
 from mmengine.dataset import BaseDataset
 from mmengine.fileio import get_local_path
@@ -13,6 +14,15 @@ from .info_format import CAMERA_NAMES, as_matrix, check_info_file
 from .occ_formats import IGNORE_INDEX, OCC_FORMATS
 
 _MAT44 = [(4, 4)]
+
+
+def _check_seconds(value, where: str) -> None:
+    """Refuse a timestamp that is not a number (a string would fail much
+    later, in the sweep merge, without naming the file)."""
+    if isinstance(value, bool) or not isinstance(
+            value, (int, float, np.integer, np.floating)):
+        raise ValueError(f'{where}: expected a number of seconds, got '
+                         f'{type(value).__name__} {value!r:.40}')
 
 
 @DATASETS.register_module()
@@ -95,6 +105,13 @@ class NuScenesOccDataset(BaseDataset):
                              f'{load_interval}')
         if num_frames < 1:
             raise ValueError(f'num_frames must be >= 1, got {num_frames}')
+        if metainfo is not None and not isinstance(metainfo, dict):
+            # mmengine would fail on it with "dictionary update sequence
+            # element #0 has length ...", naming nothing.
+            raise TypeError(
+                f'{type(self).__name__} of {ann_file}: metainfo must be a '
+                f'dict such as dict(classes=(...)), got '
+                f'{type(metainfo).__name__} {metainfo!r:.60}')
         self.num_frames = int(num_frames)
         self.occ_format = occ_format
         self.coord_frame = coord_frame
@@ -261,10 +278,12 @@ class NuScenesOccDataset(BaseDataset):
                                       f'{where} lidar_points.lidar2ego')
         info['ego2global'] = as_matrix(info['ego2global'], _MAT44,
                                        f'{where} ego2global')
+        _check_seconds(info['timestamp'], f'{where} timestamp')
         for i in range(len(info['lidar_sweeps'])):
             name = f'{where} lidar_sweeps[{i}]'
             sweep = self._entry(info['lidar_sweeps'], i,
                                 ('lidar_points', 'timestamp'), name)
+            _check_seconds(sweep['timestamp'], f'{name}.timestamp')
             pts = self._entry(sweep, 'lidar_points', ('lidar_path', ), name)
             key = 'sensor2lidar' if 'sensor2lidar' in pts else 'lidar2sensor'
             if key not in pts:

@@ -13,6 +13,7 @@ from .cpu_malloc_tuning_hook import CPUMallocTuningHook
 from .main_process_logger_hook import MainProcessLoggerHook
 from .non_finite_loss_hook import NonFiniteLossError, NonFiniteLossHook
 from .occ_visualization_hook import OccVisualizationHook
+from .random_state_hook import RandomStateHook
 from .safe_checkpoint_hook import SafeCheckpointHook
 from .weights_only_checkpoint_hook import WeightsOnlyCheckpointHook
 
@@ -20,6 +21,6 @@ __all__ = [
     'AtomicLocalBackend', 'AugmentationSeedHook', 'CheckpointMatchHook',
     'CheckpointRecoveryHook', 'CPUMallocTuningHook', 'MainProcessLoggerHook',
     'NonFiniteLossError', 'NonFiniteLossHook', 'OccVisualizationHook',
-    'SafeCheckpointHook', 'WeightsOnlyCheckpointHook', 'atomic_write',
-    'register_atomic_backend'
+    'RandomStateHook', 'SafeCheckpointHook', 'WeightsOnlyCheckpointHook',
+    'atomic_write', 'register_atomic_backend'
 ]

@@ -1,4 +1,5 @@
-"""Resume from the newest complete checkpoint, whatever a crash left.
+"""Resume from the latest complete checkpoint, whatever a crash or a copy
+left, and never go back in time.
 
 A run can be killed at any point of a save
 (:class:`~.safe_checkpoint_hook.SafeCheckpointHook` writes the new file,
@@ -11,56 +12,63 @@ without a path; ``before_run`` comes first in ``Runner.train``) this hook
 
 - removes the temporary files of interrupted atomic writes whose writer
   is no longer running;
-- points ``last_checkpoint`` at the newest complete checkpoint among the
-  ``epoch_*.pth`` / ``iter_*.pth`` files and the pointer's target
-  ("complete": it loads through the restricted loader), newest first by
-  modification time, then step;
+- points ``last_checkpoint`` at the complete checkpoint of the latest
+  step among the ``epoch_*.pth`` / ``iter_*.pth`` files and the pointer's
+  target ("complete": it loads through the restricted loader). Steps come
+  from the names or the checkpoints' ``meta``
+  (:mod:`~projects.occ_common.utils.checkpoint_steps`); a valid pointer
+  wins a tie, and file times only break the remaining ties. Ordering by
+  modification time resumed a work dir copied with ``cp`` (``epoch_1.pth``
+  copied last) from epoch 1 and then overwrote ``epoch_2.pth`` and
+  ``epoch_3.pth``;
 - refuses to resume if checkpoints exist but none is complete, naming each
   and its problem, instead of silently training from scratch.
+
+Before a resume from a named file (``--resume PATH``) it refuses, naming
+the files, if the work dir holds complete checkpoints of later steps than
+``PATH``'s, which the resumed run would overwrite.
 """
 import glob
 import os
 import os.path as osp
-import re
-from typing import List, Optional, Tuple
+from typing import List, Optional
 
 from mmdet3d.registry import HOOKS
 from mmengine.dist import barrier, is_main_process
 from mmengine.hooks import Hook
 
+from ..utils.checkpoint_steps import by_step, checkpoint_steps, name_step
 from ..utils.safe_pickle import load_checkpoint_file
 from .atomic_file_backend import atomic_write, is_temporary_file
 
-_CHECKPOINT_NAME = re.compile(r'^(epoch|iter)_(\d+)\.pth$')
 
-
-def _age_key(path: str) -> Tuple[int, int]:
-    """Newer first by modification time, then by the step in the name."""
-    match = _CHECKPOINT_NAME.match(osp.basename(path))
-    return os.stat(path).st_mtime_ns, int(match[2]) if match else -1
+def _same_file(a: str, b: str) -> bool:
+    return osp.realpath(a) == osp.realpath(b)
 
 
 def checkpoint_candidates(folder: str,
                           extra: Optional[str] = None) -> List[str]:
     """``epoch_N.pth`` / ``iter_N.pth`` of ``folder`` (and ``extra``),
-    newest first.
+    the latest step first.
 
     Args:
         folder (str): Where the checkpoints are.
         extra (str, optional): Another file to consider (the pointer's
-            target), if it exists.
+            target), if it exists; it wins a tie of steps.
 
     Returns:
-        list[str]: Paths, newest first.
+        list[str]: Paths, the latest step first (see
+        :func:`~projects.occ_common.utils.checkpoint_steps.by_step`).
     """
-    found = {
-        path
-        for path in glob.glob(osp.join(folder, '*.pth'))
-        if _CHECKPOINT_NAME.match(osp.basename(path)) and osp.isfile(path)
-    }
+    found = [
+        path for path in sorted(glob.glob(osp.join(folder, '*.pth')))
+        if name_step(path) is not None and osp.isfile(path)
+    ]
     if extra and osp.isfile(extra):
-        found.add(extra)
-    return sorted(found, key=_age_key, reverse=True)
+        # The pointer may name a file of the folder by another spelling.
+        found = [path for path in found if not _same_file(path, extra)]
+        found.append(extra)
+    return by_step(found, preferred=extra)
 
 
 def checkpoint_problem(path: str) -> Optional[str]:
@@ -83,7 +91,8 @@ def checkpoint_problem(path: str) -> Optional[str]:
 
 def newest_checkpoint(folder: str,
                       extra: Optional[str] = None) -> Optional[str]:
-    """The newest complete checkpoint of ``folder`` (see the module doc).
+    """The complete checkpoint of ``folder`` of the latest step (see the
+    module doc).
 
     Args:
         folder (str): Where the checkpoints are.
@@ -96,6 +105,36 @@ def newest_checkpoint(folder: str,
         if checkpoint_problem(path) is None:
             return path
     return None
+
+
+def later_checkpoints(work_dir: str, resume_from: str) -> List[str]:
+    """Complete checkpoints of ``work_dir`` of a later step than
+    ``resume_from``: what a run resumed from it would overwrite.
+
+    Args:
+        work_dir (str): The Runner's work dir.
+        resume_from (str): The checkpoint the run resumes from.
+
+    Returns:
+        list[str]: Their paths, the earliest step first.
+    """
+    found = [
+        path for path in sorted(glob.glob(osp.join(work_dir, '*.pth')))
+        if name_step(path) is not None and osp.isfile(path)
+        and not _same_file(path, resume_from)
+    ]
+    if not osp.isfile(resume_from):  # a URL: only its name can tell
+        own = name_step(resume_from)
+        found = [
+            path for path in found
+            if own is not None and name_step(path)[0] == own[0]
+        ]
+    steps = checkpoint_steps(found + [resume_from])
+    if steps[resume_from] < 0:
+        return []  # it does not load: the Runner's load says why
+    later = [path for path in found if steps[path] > steps[resume_from]]
+    return sorted((path for path in later if checkpoint_problem(path) is None),
+                  key=steps.get)
 
 
 def _writer_alive(name: str) -> bool:
@@ -114,7 +153,7 @@ def _writer_alive(name: str) -> bool:
 
 def repair_work_dir(work_dir: str) -> List[str]:
     """Remove stale temporary files and point ``last_checkpoint`` at the
-    newest complete checkpoint.
+    complete checkpoint of the latest step.
 
     Args:
         work_dir (str): The Runner's work dir.
@@ -144,8 +183,9 @@ def repair_work_dir(work_dir: str) -> List[str]:
         if problem is None:
             if path != target:
                 atomic_write(pointer, path.encode())
-                actions.append(f'last_checkpoint now names the newest '
-                               f'complete checkpoint {path} ({was})')
+                actions.append(f'last_checkpoint now names the complete '
+                               f'checkpoint of the latest step {path} '
+                               f'({was})')
             for skipped, why in problems:
                 actions.append(f'skipped {skipped}: {why}')
             return actions
@@ -165,26 +205,55 @@ def repair_work_dir(work_dir: str) -> List[str]:
     return actions
 
 
+def check_no_later_checkpoint(work_dir: str, resume_from: str) -> None:
+    """Refuse to resume from ``resume_from`` if that would overwrite
+    checkpoints of later steps in ``work_dir``.
+
+    Args:
+        work_dir (str): The Runner's work dir.
+        resume_from (str): The file named by ``--resume PATH``.
+
+    Raises:
+        RuntimeError: Naming ``resume_from`` and the later checkpoints.
+    """
+    later = later_checkpoints(work_dir, resume_from)
+    if later:
+        raise RuntimeError(
+            f'--resume {resume_from}: {work_dir} holds checkpoints of later '
+            f'steps ({", ".join(later)}), which the resumed run would '
+            'overwrite. Resume from the latest with --resume (no path), or '
+            'move those files out of the work dir, or pass another '
+            '--work-dir.')
+
+
 @HOOKS.register_module()
 class CheckpointRecoveryHook(Hook):
-    """Repair the work dir before the Runner auto-resumes from it.
+    """Repair the work dir before the Runner resumes from it.
 
     Listed in ``custom_hooks`` of ``configs/_base_/default_runtime.py``.
-    Acts only when the config asks to resume without naming a file
-    (``resume=True``, ``load_from=None``: ``tools/train.py --resume``), so
-    evaluating or training elsewhere never touches a work dir. Only rank 0
-    touches the disk; the other ranks wait for it, since every rank reads
+    Acts only when the config asks to resume: without naming a file
+    (``resume=True``, ``load_from=None``: ``tools/train.py --resume``) it
+    repairs the work dir (:func:`repair_work_dir`); from a named file
+    (``--resume PATH``) it only checks that no later checkpoint would be
+    overwritten (:func:`check_no_later_checkpoint`). Evaluating or
+    training elsewhere never touches a work dir. Only rank 0 touches the
+    disk; the other ranks wait for it, since every rank reads
     ``last_checkpoint`` when resuming.
     """
 
     priority = 'VERY_HIGH'
 
     def before_run(self, runner) -> None:
-        """Clean up ``runner.work_dir`` (see :func:`repair_work_dir`)."""
+        """Clean up or check ``runner.work_dir`` (see the class doc)."""
         cfg = runner.cfg
-        if not cfg.get('resume', False) or cfg.get('load_from') is not None:
+        if not cfg.get('resume', False):
             return
+        load_from = cfg.get('load_from')
         if is_main_process():
-            for action in repair_work_dir(runner.work_dir):
-                runner.logger.warning(f'CheckpointRecoveryHook: {action}.')
+            if load_from is not None:
+                check_no_later_checkpoint(runner.work_dir, load_from)
+            else:
+                for action in repair_work_dir(runner.work_dir):
+                    runner.logger.warning(
+                        f'CheckpointRecoveryHook: {action}.')
         barrier()

@@ -110,6 +110,10 @@ class ToyOccupancyModel(BaseModel):
             training iteration infinite while its loss stays finite, so
             that the step explodes the weights (counted as
             ``nan_at_iter``). Defaults to None (never).
+        dropout (float): Probability of ``Dropout3d`` on the inputs in
+            training: random draws from torch's global generator, as
+            DropPath's, to test that a resume repeats them. Defaults to 0
+            (no dropout, nothing drawn).
     """
 
     def __init__(self,
@@ -118,9 +122,11 @@ class ToyOccupancyModel(BaseModel):
                  data_preprocessor: Optional[dict] = None,
                  init_cfg: Optional[dict] = None,
                  nan_at_iter: Optional[int] = None,
-                 explode_at_iter: Optional[int] = None) -> None:
+                 explode_at_iter: Optional[int] = None,
+                 dropout: float = 0.) -> None:
         super().__init__(
             data_preprocessor=data_preprocessor, init_cfg=init_cfg)
+        self.dropout = nn.Dropout3d(dropout) if dropout > 0 else None
         self.classifier = nn.Conv3d(in_channels, num_classes, 1)
         self.nan_at_iter = nan_at_iter
         self.explode_at_iter = explode_at_iter
@@ -141,6 +147,8 @@ class ToyOccupancyModel(BaseModel):
         """
         if isinstance(inputs, (list, tuple)):
             inputs = torch.stack(list(inputs))
+        if self.dropout is not None:
+            inputs = self.dropout(inputs)
         logits = self.classifier(inputs)
         if mode == 'tensor':
             return logits

@@ -122,13 +122,16 @@ class LoadOccupancyGT(BaseTransform):
                                  "semantics, mask_lidar, mask_camera, got "
                                  f'{sorted(arrays)}')
             arr = arrays[key]
+            # Class indices must be integers: boolean semantics would pass
+            # as classes 0 / 1. The masks may be either.
+            kinds = 'an integer' if key == 'semantics' else \
+                'an integer or bool'
             if arr.shape != grid or not (
-                    np.issubdtype(arr.dtype, np.integer)
-                    or arr.dtype == np.bool_):
+                    np.issubdtype(arr.dtype, np.integer) or
+                    (arr.dtype == np.bool_ and key != 'semantics')):
                 raise ValueError(
-                    f'Occ3D label {path}: {key} must be an integer or bool '
-                    f'array of shape {grid}, got {arr.dtype} '
-                    f'{arr.shape}')
+                    f'Occ3D label {path}: {key} must be {kinds} array of '
+                    f'shape {grid}, got {arr.dtype} {arr.shape}')
             out[key] = arr
         sem = out['semantics']
         if sem.size and (sem.min() < 0 or sem.max() > 17):
@@ -207,6 +210,10 @@ class LoadLidarSegLabels(BaseTransform):
 
     - pts_semantic_mask_path (str | None)
     - points (BasePoints, optional): Key frame, to check the count.
+    - points_kept_rows (np.ndarray, optional): Shape (P_file,), bool: the
+      rows of the key-frame file ``LoadOccPointsFromFile`` kept (it drops
+      points with NaN / inf values); the labels of the others are dropped
+      too.
 
     Added Keys:
 
@@ -239,6 +246,14 @@ class LoadLidarSegLabels(BaseTransform):
                 f' {results.get("ann_file", "its info file")}')
         raw = read_bytes(path, 'lidarseg label', self.backend_args)
         labels = lidarseg_to_occ16(np.frombuffer(raw, np.uint8), path)
+        kept = results.get('points_kept_rows')
+        if kept is not None:
+            if len(labels) != len(kept):
+                raise ValueError(
+                    f'lidarseg label {path} has {len(labels)} labels, '
+                    f'expected one per point of {results.get("lidar_path")} '
+                    f'({len(kept)})')
+            labels = labels[kept]
         if 'points' in results and len(labels) != len(results['points']):
             raise ValueError(
                 f'lidarseg label {path} has {len(labels)} labels, expected '

@@ -2,14 +2,18 @@
 
 Subclasses of mmdet3d's loaders that keep their keys and options and add
 what they lack: a missing or truncated ``.bin`` raises an error naming the
-file (mmdet3d's give a bare reshape error), and sweeps are moved into the
-key frame with the exact inverse of ``lidar2sensor``. mmdet3d 1.4's
+file (mmdet3d's give a bare reshape error), as does a file of another
+dtype or point width (read as float32 x 5 it would give garbage points);
+points with NaN / inf values are dropped with one warning per file, giving
+their count; and sweeps are moved into the key frame with the exact
+inverse of ``lidar2sensor``. mmdet3d 1.4's
 ``LoadPointsFromMultiSweeps`` computes ``p @ R - t`` from
 ``lidar2sensor = [R | t]``, i.e. ``R^T p - t`` instead of
 ``R^T (p - t)`` (open-mmlab/mmdetection3d#3054): the sweep is shifted by
 ``(R^T - I) t``, which grows with the ego's turn rate and speed (about
 0.5 m for a 10 m/s car turning at 0.1 rad/s, 0.5 s back).
 """
+import warnings
 from typing import Optional, Sequence
 
 import numpy as np
@@ -18,14 +22,75 @@ from mmdet3d.datasets.transforms import (LoadPointsFromFile,
 from mmdet3d.registry import TRANSFORMS
 from mmengine.fileio import get
 
+from ..datasets.info_format import NUM_POINT_FEATS
 from .ego_points import check_ego_box, remove_ego_from_sweep
+
+#: Files already warned about (one warning per file and process).
+_WARNED = set()
+
+#: Column of the ring (beam) index in nuScenes' x, y, z, intensity, ring.
+RING_COLUMN = 4
+
+
+def _check_ring_column(points: np.ndarray, path: str, what: str) -> None:
+    """Refuse a nuScenes-layout file whose ring column is not beam indices.
+
+    A float64 file, or one of 4 values a point, read as 5 float32 values
+    has the right size more often than not; its fifth column is then
+    fractions or garbage instead of the integers 0..255 of a beam index.
+    """
+    ring = points[:, RING_COLUMN]
+    ring = ring[np.isfinite(ring)]
+    bad = (ring != np.round(ring)) | (ring < 0) | (ring > 255)
+    if bad.any():
+        raise ValueError(
+            f'{what} file {path}: the fifth value of {int(bad.sum())} of its '
+            f'{len(points)} points (e.g. {ring[bad][0]!r}) is no ring '
+            'index (an integer 0..255, as in nuScenes files of x, y, z, '
+            'intensity, ring as float32): the file holds another dtype '
+            '(float64?) or another number of values per point. Convert it '
+            'to 5 float32 values a point, or pass check_ring=False if its '
+            'fifth value is something else.')
+
+
+def _seconds(value, where: str) -> float:
+    """A timestamp in seconds, refusing strings and other non-numbers."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(
+            value, (int, float, np.integer, np.floating)):
+        raise ValueError(f'{where} must be a number of seconds, got '
+                         f'{type(value).__name__} {value!r:.40}')
+    return float(value)
+
+
+def finite_rows(points: np.ndarray, path: str, what: str) -> np.ndarray:
+    """Which points have only finite values; warn once per file if not all.
+
+    Args:
+        points (np.ndarray): Shape (P, C).
+        path (str): The file, for the warning.
+        what (str): What it is, for the warning.
+
+    Returns:
+        np.ndarray: Shape (P,), bool.
+    """
+    kept = np.isfinite(points).all(axis=1)
+    dropped = int(len(kept) - kept.sum())
+    if dropped and path not in _WARNED:
+        _WARNED.add(path)
+        share = 'all' if dropped == len(kept) else f'{dropped} of'
+        warnings.warn(
+            f'{what} file {path}: {share} {len(kept)} points have NaN / inf '
+            'values and are dropped.')
+    return kept
 
 
 def read_points_file(path: str,
                      load_dim: int,
                      what: str = 'LiDAR points',
-                     backend_args: Optional[dict] = None) -> np.ndarray:
-    """Read a float32 point file (``.bin``) and check its size.
+                     backend_args: Optional[dict] = None,
+                     drop_nonfinite: bool = True,
+                     check_ring: bool = True) -> np.ndarray:
+    """Read a float32 point file (``.bin``) and check its size and layout.
 
     Args:
         path (str): File to read.
@@ -33,13 +98,19 @@ def read_points_file(path: str,
         what (str): What the file is, for error messages.
             Defaults to 'LiDAR points'.
         backend_args (dict, optional): mmengine file backend arguments.
+        drop_nonfinite (bool): Drop the points with NaN / inf values (one
+            warning per file, see :func:`finite_rows`). Defaults to True.
+        check_ring (bool): With ``load_dim`` 5 (nuScenes' x, y, z,
+            intensity, ring), refuse a file whose fifth values are not
+            ring indices. Defaults to True.
 
     Returns:
         np.ndarray: Shape (P, load_dim), float32, writable. P may be 0.
 
     Raises:
         FileNotFoundError: The file does not exist.
-        ValueError: Its size is not a whole number of points.
+        ValueError: Its size is not a whole number of points, or its ring
+            column holds no ring indices (another dtype or point width).
     """
     try:
         raw = get(path, backend_args=backend_args)
@@ -52,7 +123,14 @@ def read_points_file(path: str,
             f'{what} file {path} has {len(raw)} bytes, not a multiple of '
             f'{point_bytes} ({load_dim} float32 values per point): the file '
             'is truncated or has another layout')
-    return np.frombuffer(raw, dtype=np.float32).reshape(-1, load_dim).copy()
+    points = np.frombuffer(raw, dtype=np.float32).reshape(-1, load_dim)
+    if check_ring and load_dim == NUM_POINT_FEATS:
+        _check_ring_column(points, path, what)
+    if drop_nonfinite:
+        kept = finite_rows(points, path, what)
+        if not kept.all():
+            return points[kept]
+    return points.copy()
 
 
 @TRANSFORMS.register_module()
@@ -62,23 +140,78 @@ class LoadOccPointsFromFile(LoadPointsFromFile):
     Same arguments, keys and behaviour as the parent (``coord_type``,
     ``load_dim``, ``use_dim``, ...); a missing file or one whose size is
     not a multiple of ``load_dim`` float32 values raises an error naming
-    the file. nuScenes files hold x, y, z, intensity, ring (``load_dim=5``).
-    An empty file is a valid sample with zero points.
+    the file. nuScenes files hold x, y, z, intensity, ring (``load_dim=5``):
+    a file whose ring column is not beam indices (another dtype or point
+    width) is refused, as is a ``load_dim`` other than the sample's
+    ``num_pts_feats``. Points with NaN / inf values are dropped (one
+    warning per file), and ``points_kept_rows`` tells
+    ``LoadLidarSegLabels`` which rows of the file are left. An empty file
+    is a valid sample with zero points.
+
+    Args:
+        check_ring (bool): Refuse a ``load_dim=5`` file whose fifth values
+            are not ring indices. Defaults to True.
+        **kwargs: The arguments of ``LoadPointsFromFile``.
 
     Required Keys:
 
     - lidar_points (dict): ``lidar_path``.
+    - num_pts_feats (int, optional): Values per point the info records.
 
     Added Keys:
 
     - points (BasePoints): Shape (P, len(use_dim)).
+    - points_kept_rows (np.ndarray, optional): Shape (P_file,), bool;
+      only if points were dropped.
     """
 
+    def __init__(self, check_ring: bool = True, **kwargs) -> None:
+        super().__init__(**kwargs)
+        self.check_ring = check_ring
+        self._kept_rows = None
+
     def _load_points(self, pts_filename: str) -> np.ndarray:
-        """Read the key frame as a flat float32 array."""
-        return read_points_file(pts_filename, self.load_dim,
-                                'LiDAR key frame',
-                                self.backend_args).reshape(-1)
+        """Read the key frame as a flat float32 array of finite points."""
+        points = read_points_file(pts_filename, self.load_dim,
+                                  'LiDAR key frame', self.backend_args,
+                                  drop_nonfinite=False,
+                                  check_ring=self.check_ring)
+        kept = finite_rows(points, pts_filename, 'LiDAR key frame')
+        # Handed to transform() right after this call returns.
+        self._kept_rows = None if kept.all() else kept
+        return (points if kept.all() else points[kept]).reshape(-1)
+
+    def transform(self, results: dict) -> dict:
+        """Load the key frame (see the class doc).
+
+        Args:
+            results (dict): Pipeline state.
+
+        Returns:
+            dict: The state with ``points``.
+
+        Raises:
+            ValueError: If the info's ``num_pts_feats`` is not
+                ``load_dim``, or the file is refused.
+        """
+        recorded = results.get('num_pts_feats')
+        if recorded is not None and int(recorded) != self.load_dim:
+            raise ValueError(
+                f'{results.get("ann_file", "the info file")}: sample '
+                f'{results.get("token", "?")} records {recorded} values per '
+                f'LiDAR point (num_pts_feats), but load_dim is '
+                f'{self.load_dim}: {results["lidar_points"]["lidar_path"]} '
+                'would be read as garbage points.')
+        results = super().transform(results)
+        if self._kept_rows is not None:
+            results['points_kept_rows'] = self._kept_rows
+            self._kept_rows = None
+        return results
+
+    def __repr__(self) -> str:
+        """str: The transform and its arguments."""
+        return (super().__repr__()[:-1] +
+                f', check_ring={self.check_ring})')
 
 
 @TRANSFORMS.register_module()
@@ -93,7 +226,9 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
 
     * sweep points go to the key frame with ``sensor2lidar`` (or the exact
       inverse of ``lidar2sensor``), see the module docstring;
-    * missing / truncated sweep files raise an error naming the file;
+    * missing / truncated sweep files, and files of another dtype or point
+      width, raise an error naming the file; points with NaN / inf values
+      are dropped with one warning per file;
     * ``ego_box`` removes the ego vehicle's returns from every sweep in its
       own sensor frame (see :mod:`.ego_points`), a box round the car where
       ``remove_close`` is a 1 m sphere round the sensor;
@@ -112,6 +247,9 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
             ``lidar_points.lidar2ego`` places it (the key frame's
             ``lidar2ego`` when the sweep has none: one sensor, one mount).
             Defaults to None (kept).
+        check_ring (bool): Refuse a ``load_dim=5`` sweep whose fifth
+            values are not ring indices (another dtype or point width).
+            Defaults to True.
         **kwargs: ``backend_args``, ``pad_empty_sweeps``, ``remove_close``,
             ``test_mode`` of the parent.
 
@@ -142,6 +280,7 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
                  use_dim=(0, 1, 2, 3, 4),
                  ignore_index: int = 255,
                  ego_box: Optional[Sequence[float]] = None,
+                 check_ring: bool = True,
                  **kwargs) -> None:
         super().__init__(
             sweeps_num=sweeps_num,
@@ -150,6 +289,7 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
             **kwargs)
         self.ignore_index = ignore_index
         self.ego_box = None if ego_box is None else check_ego_box(ego_box)
+        self.check_ring = check_ring
 
     @staticmethod
     def sweep_to_key(sweep: dict) -> np.ndarray:
@@ -205,14 +345,19 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
                 pad = self._remove_close(key) if self.remove_close else key
                 parts += [pad] * self.sweeps_num
         else:
-            key_time = results['timestamp']
+            token = results.get('token', '?')
+            key_time = _seconds(results['timestamp'],
+                                f'sample {token}: timestamp')
             for idx in self._choose(len(sweeps)):
                 sweep = sweeps[idx]
                 path = sweep['lidar_points']['lidar_path']
+                sweep_time = _seconds(
+                    sweep['timestamp'],
+                    f'sample {token}: timestamp of sweep {path}')
                 arr = read_points_file(
                     path, self.load_dim,
                     f'LiDAR sweep of sample {results.get("token", "?")}',
-                    self.backend_args)
+                    self.backend_args, check_ring=self.check_ring)
                 if self.remove_close:
                     # In the sweep's own frame, where "close" means the car.
                     arr = self._remove_close(arr)
@@ -224,7 +369,7 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
                         self.ego_box)
                 mat = self.sweep_to_key(sweep).astype(np.float32)
                 arr[:, :3] = arr[:, :3] @ mat[:3, :3].T + mat[:3, 3]
-                arr[:, 4] = key_time - sweep['timestamp']
+                arr[:, 4] = key_time - sweep_time
                 parts.append(arr)
         num_key = len(points)
         results['points'] = self._merge(points, parts)

@@ -25,6 +25,10 @@ run these checks first:
   ``train_pipeline``, ...), since configs name their shared values at the
   top level by design; a real typo of a Runner key is almost always one or
   two keystrokes away from it. Keys starting with ``_`` are never checked.
+* :func:`check_env_cfg`: ``env_cfg`` is a closed dict (mmengine's
+  ``Runner.setup_env`` reads :data:`ENV_CFG_KEYS` and ignores any other
+  key, so ``cudnn_benchmak=True`` was silently dropped): every other key
+  in it, or in its ``mp_cfg``, is an error.
 """
 import contextlib
 import inspect
@@ -42,6 +46,11 @@ EXTRA_RUNNER_KEYS = frozenset({
     'find_unused_parameters', 'gpu_ids', 'dist_params', 'tta_model',
     'tta_pipeline', 'strategy', 'work_dir', 'launcher', 'auto_scale_lr'
 })
+
+
+#: The keys of ``env_cfg`` mmengine 0.10.7's ``Runner.setup_env`` reads.
+ENV_CFG_KEYS = frozenset(
+    {'cudnn_benchmark', 'mp_cfg', 'dist_cfg', 'resource_limit'})
 
 
 def runner_keys() -> frozenset:
@@ -105,6 +114,55 @@ def check_top_level_keys(keys: Iterable[str], filename: str) -> None:
             'such a key, so the run would silently use the base config '
             'instead. Rename it; a variable of your own must not lie '
             'within two edits of a Runner key.')
+
+
+def _mp_cfg_keys() -> frozenset:
+    """Arguments ``env_cfg.mp_cfg`` may give ``set_multi_processing``."""
+    from mmengine.utils.dl_utils import set_multi_processing
+    params = inspect.signature(set_multi_processing).parameters
+    return frozenset(params) - {'distributed'}  # the Runner passes it
+
+
+def _unknown(keys: Iterable[str], known: frozenset) -> List[str]:
+    found = []
+    for key in sorted(keys):
+        if key in known:
+            continue
+        close = sorted(k for k in known if edit_distance(key, k) <= 2)
+        found.append(f'{key!r}' +
+                     (f' (did you mean {close[0]!r}?)' if close else ''))
+    return found
+
+
+def check_env_cfg(cfg: Mapping, filename: str) -> None:
+    """Refuse unknown keys in ``env_cfg`` and its ``mp_cfg``.
+
+    Args:
+        cfg (Mapping): The config.
+        filename (str): The config file (or option), for the message.
+
+    Raises:
+        ValueError: Naming each unknown key and the key it resembles.
+    """
+    env_cfg = cfg.get('env_cfg')
+    if not isinstance(env_cfg, Mapping):
+        return
+    problems = []
+    unknown = _unknown(env_cfg, ENV_CFG_KEYS)
+    if unknown:
+        problems.append(f'env_cfg: {", ".join(unknown)} (it takes '
+                        f'{sorted(ENV_CFG_KEYS)})')
+    mp_cfg = env_cfg.get('mp_cfg')
+    if isinstance(mp_cfg, Mapping):
+        unknown = _unknown(mp_cfg, _mp_cfg_keys())
+        if unknown:
+            problems.append(f'env_cfg.mp_cfg: {", ".join(unknown)} (it '
+                            f'takes {sorted(_mp_cfg_keys())})')
+    if problems:
+        raise ValueError(
+            f'{filename}: unknown key in {"; ".join(problems)}. mmengine '
+            'ignores such a key, so the run would silently go without the '
+            'setting.')
 
 
 class CfgOptionsError(ValueError):
@@ -324,6 +382,7 @@ def merge_cfg_options(cfg,
                               f'into the config ({err})') from err
     try:
         check_top_level_keys(cfg.keys(), option)
+        check_env_cfg(cfg, option)
     except ValueError as err:
         raise CfgOptionsError(str(err)) from err
     return sorted(options)
@@ -342,11 +401,13 @@ def apply_cfg_options(cfg, args, dest: str = 'cfg_options') -> List[str]:
 
     Raises:
         ValueError: If the config has a top-level typo (see
-            :func:`check_top_level_keys`).
+            :func:`check_top_level_keys`) or an unknown ``env_cfg`` key
+            (:func:`check_env_cfg`).
         CfgOptionsError: A ``ValueError``, if an override has the wrong
             kind, cannot be merged, or adds a top-level typo.
     """
     check_top_level_keys(cfg.keys(), cfg.filename or '<config>')
+    check_env_cfg(cfg, cfg.filename or '<config>')
     return merge_cfg_options(cfg, getattr(args, dest, None),
                              getattr(args, f'{dest}_raw', None),
                              f'--{dest.replace("_", "-")}')
@@ -354,6 +415,7 @@ def apply_cfg_options(cfg, args, dest: str = 'cfg_options') -> List[str]:
 
 __all__ = [
     'CfgOptionsAction', 'CfgOptionsError', 'apply_cfg_options',
-    'cfg_errors_exit', 'check_cfg_options', 'check_top_level_keys',
-    'edit_distance', 'merge_cfg_options', 'runner_keys'
+    'cfg_errors_exit', 'check_cfg_options', 'check_env_cfg',
+    'check_top_level_keys', 'edit_distance', 'merge_cfg_options',
+    'runner_keys'
 ]

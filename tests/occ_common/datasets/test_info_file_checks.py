@@ -93,10 +93,13 @@ def test_empty_or_truncated_info_file_names_it(world_copy, size):
      s['lidar_sweeps'][0]['lidar_points'].pop('lidar2sensor'),
      r'lidar_sweeps\[0\]: lidar_points needs sensor2lidar or lidar2sensor'),
     (lambda s: s.pop('lidar_points'), r"lacks the keys \['lidar_points'\]"),
+    (lambda s: s['lidar_sweeps'][0].update(timestamp='1532402927.5'),
+     r"lidar_sweeps\[0\].timestamp: expected a number of seconds, got str"),
 ])
 def test_malformed_sample_names_file_sample_and_key(world_copy, edit, msg):
     """A missing nested key (KeyError 'cam2img'), a 3x3 lidar2ego
-    (IndexError), NaN / inf calibration (later a crash inside BCE)."""
+    (IndexError), NaN / inf calibration (later a crash inside BCE), a
+    string timestamp (later a TypeError in the sweep merge)."""
     infos = rewrite(world_copy, lambda i: edit(i['data_list'][1]))
     token = infos['data_list'][1]['token']
     with pytest.raises(ValueError,
@@ -148,3 +151,39 @@ def test_v1_0_test_of_a_synthetic_world(tmp_path):
     written = run_create_data('--root-path', root, '--version', 'v1.0-test')
     assert list(written) == ['test']
     assert len(build(root, test_mode=True, split='test')) == 2
+
+
+def _duplicate_first(infos):
+    infos['data_list'].append(dict(infos['data_list'][0]))
+
+
+@pytest.mark.parametrize('edit, msg', [
+    (_duplicate_first,
+     r'sample (\w+) appears twice in data_list \(at 0 and 2\): it would be '
+     'trained on and evaluated twice'),
+    (lambda i: i['data_list'].insert(1, ['not', 'a', 'dict']),
+     r"sample 1 of data_list is a list \(\['not', 'a', 'dict'\]\), not a "
+     'dict'),
+    (lambda i: i.update(metainfo=[('info_version', 'occ-nus-1.0')]),
+     'metainfo must be a dict .* got list'),
+])
+def test_unclear_or_silent_info_files_name_file_and_sample(
+        world_copy, edit, msg):
+    """A sample listed twice (before: loaded twice, without a word), an
+    entry that is not a dict and a metainfo list (before, both:
+    AttributeError "'list' object has no attribute 'get'")."""
+    rewrite(world_copy, edit)
+    with pytest.raises(ValueError, match=f'{TRAIN}: {msg}'):
+        build(world_copy, test_mode=True)
+
+
+def test_metainfo_argument_must_be_a_dict(world_copy):
+    """metainfo=[...] in a dataset config: a TypeError naming the info
+    file (before: mmengine's "dictionary update sequence element #0 has
+    length 7; 2 is required")."""
+    cfg = Config.fromfile(
+        osp.join(REPO, 'configs', '_base_', 'datasets', 'surroundocc-nus.py'))
+    ds_cfg = cfg.train_dataloader.dataset
+    ds_cfg.update(data_root=world_copy, metainfo=['classes'])
+    with pytest.raises(TypeError, match=f'{TRAIN}: metainfo must be a dict'):
+        DATASETS.build(ds_cfg)

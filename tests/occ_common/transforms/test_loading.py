@@ -68,6 +68,7 @@ def test_surroundocc_label(tmp_path):
 @pytest.mark.parametrize('array, msg', [
     (np.zeros((3, 3), np.int64), r'integer \(M, 4\).*\(3, 3\)'),
     (np.zeros((3, 4), np.float32), r'integer \(M, 4\).*float32'),
+    (np.ones((3, 4), bool), r'integer \(M, 4\).*bool'),
     (np.array([[200, 0, 0, 1]]), r'voxel indices must lie in'),
 ])
 def test_surroundocc_bad_label_names_file(tmp_path, array, msg):
@@ -105,7 +106,8 @@ def test_occ3d_label_and_camera_mask(tmp_path):
 
 
 def test_occ3d_bad_labels_name_file(tmp_path):
-    """A missing array, a wrong shape and a missing file name the file."""
+    """A missing array, a wrong shape, boolean semantics and a missing
+    file name the file."""
     path = str(tmp_path / 'labels.npz')
     np.savez(path, semantics=np.zeros((200, 200, 16), np.uint8))
     with pytest.raises(ValueError, match=r'labels\.npz.*mask_lidar'):
@@ -113,6 +115,11 @@ def test_occ3d_bad_labels_name_file(tmp_path):
     _occ3d(path, semantics=np.zeros((200, 200, 8), np.uint8))
     with pytest.raises(ValueError, match=r'labels\.npz: semantics.*'
                        r'\(200, 200, 16\).*\(200, 200, 8\)'):
+        LoadOccupancyGT('occ3d')(dict(occ_path=path))
+    # Boolean semantics would pass as classes 0 / 1 (they did before).
+    _occ3d(path, semantics=np.ones((200, 200, 16), bool))
+    with pytest.raises(ValueError, match=r'labels\.npz: semantics must be '
+                       'an integer array .* got bool'):
         LoadOccupancyGT('occ3d')(dict(occ_path=path))
     with pytest.raises(FileNotFoundError, match=r'gone\.npz'):
         LoadOccupancyGT('occ3d')(dict(occ_path=str(tmp_path / 'gone.npz')))

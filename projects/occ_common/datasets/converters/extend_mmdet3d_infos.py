@@ -13,7 +13,11 @@ unpickler and writes the info file of this library for the same samples:
   by the scene: from the nuScenes tables when the root has them, else
   found by the sample token under the Occ3D folder);
 * scene, rain and night come from the nuScenes tables (``scene.json``,
-  ``sample.json``); without them they are unknown (None, False, reported).
+  ``sample.json``); without them they are unknown (None, False, reported);
+* each image's ``height`` / ``width`` (the size its ``cam2img`` belongs
+  to, which mmdet3d's infos do not record) is read from the image file's
+  header, so that loading refuses an image resized after the conversion
+  (``LoadMultiViewImagesOcc``) instead of projecting off by the ratio.
 
 Missing sweeps or labels are reported and the rest kept, as in the
 converter (:mod:`.report`); a missing key frame or image is an error.
@@ -24,6 +28,7 @@ import os.path as osp
 from typing import Dict, Optional, Tuple
 
 import numpy as np
+from PIL import Image, UnidentifiedImageError
 
 from ...utils.safe_pickle import load_info_file
 from ..info_format import CAMERA_NAMES, weather_flags
@@ -64,6 +69,28 @@ class _Resolver:
                 f'{self.info_file}: {what} of sample {token} not found: '
                 f'{name} under {self.root} (tried {folder}/ and the root)')
         return rel
+
+
+def image_size(path: str, what: str) -> Tuple[int, int]:
+    """``(height, width)`` of an image, from its header only.
+
+    Args:
+        path (str): A JPEG / PNG file.
+        what (str): File, sample and camera, for the message.
+
+    Returns:
+        tuple[int, int]: Its height and width in pixels.
+
+    Raises:
+        ValueError: If it is not an image PIL recognises.
+    """
+    try:
+        with Image.open(path) as img:  # reads the header, not the pixels
+            width, height = img.size
+    except (UnidentifiedImageError, OSError) as err:
+        raise ValueError(f'{what}: {path} is not a readable image ({err})'
+                         ) from None
+    return int(height), int(width)
 
 
 def _scene_index(root: str, version: str) -> Dict[str, dict]:
@@ -148,9 +175,15 @@ def extend_entry(entry: dict, files: _Resolver, scenes: Dict[str, dict],
             raise ValueError(f'{files.info_file}: sample {token} has no '
                              f'{cam} image; it has {sorted(entry["images"])}')
         image = entry['images'][cam]
+        img_path = files.need(image['img_path'], f'samples/{cam}',
+                              f'{cam} image', token)
+        height, width = image_size(
+            osp.join(files.root, img_path),
+            f'{files.info_file}: {cam} image of sample {token}')
         images[cam] = dict(
-            img_path=files.need(image['img_path'], f'samples/{cam}',
-                                f'{cam} image', token),
+            img_path=img_path,
+            height=height,
+            width=width,
             cam2img=_matrix(image['cam2img']),
             lidar2cam=_matrix(image['lidar2cam']),
             cam2ego=_matrix(image['cam2ego']),
