@@ -22,10 +22,11 @@ labels: the config's test pipeline runs as ``tools/test.py --format-only``
 runs it (``LoadOccupancyGT(allow_unlabelled=True)``, no lidarseg steps).
 
 Writes, named after the sample token, ``<out-dir>/<token>.npz`` (the
-predicted labels, uint8, as ``semantics`` and ``arr_0``: the Occ3D file of
-``tools/test.py --format-only``) and ``<out-dir>/<token>.png`` (the
-picture of ``OccLocalVisualizer``: the cameras with the occupancy
-projected, top-down and 3D), and prints one line per file.
+predicted labels, uint8, as ``semantics``, ``arr_0`` and ``pred``: the
+Occ3D file of ``tools/test.py --format-only``) and
+``<out-dir>/<token>.png`` (the picture of ``OccLocalVisualizer``: the
+cameras with the occupancy projected, top-down and 3D), and prints one
+line per file.
 
 As in mmdet3d's ``init_model`` / ``inference_multi_modality_detector``,
 the model is built from the config and the sample goes through the
@@ -37,13 +38,12 @@ differ from the model's, or that holds NaN / inf, is refused, as
 or sample and what was expected.
 """
 import argparse
-import copy
 import os.path as osp
 import sys
 import tempfile
 
 import torch
-from mmdet3d.registry import DATASETS, MODELS, VISUALIZERS
+from mmdet3d.registry import MODELS, VISUALIZERS
 from mmengine.config import Config
 from mmengine.dataset import pseudo_collate
 from mmengine.registry import init_default_scope
@@ -56,8 +56,8 @@ from projects.occ_common.utils.config_checks import (CfgOptionsAction,
                                                      apply_cfg_options)
 from projects.occ_common.utils.safe_pickle import (RefusedGlobalError,
                                                    load_checkpoint_file)
-from projects.occ_common.utils.unlabelled_pipeline import (innermost_dataset,
-                                                           unlabelled_pipeline)
+from projects.occ_common.utils.unlabelled_pipeline import \
+    unlabelled_test_dataset
 
 
 def parse_args(argv=None):
@@ -130,43 +130,14 @@ def init_model(cfg: Config, checkpoint: str, device: str) -> torch.nn.Module:
         RefusedGlobalError: It pickles code (nothing of it was run).
     """
     from projects.occ_common.hooks.checkpoint_match_hook import \
-        check_checkpoint_state
+        load_checked_weights
     if device.startswith('cuda') and not torch.cuda.is_available():
         raise ValueError(f'--device {device}: CUDA is not available here; '
                          'use --device cpu')
     loaded = load_checkpoint_file(checkpoint, map_location='cpu')
-    state = loaded.get('state_dict', loaded) if isinstance(loaded,
-                                                           dict) else None
-    if not isinstance(state, dict):
-        raise ValueError(f'{checkpoint}: expected a checkpoint dict (a '
-                         "state dict or dict(state_dict=...)), got "
-                         f'{type(loaded).__name__}')
     model = MODELS.build(cfg.model)
-    state = check_checkpoint_state(model, state, checkpoint, cfg.filename)
-    model.load_state_dict(state, strict=False)  # num_batches_tracked
+    load_checked_weights(model, loaded, checkpoint, cfg.filename)
     return model.to(device).eval()
-
-
-def build_sample_dataset(cfg: Config, sample: SampleInfo, data_root: str):
-    """The config's test dataset on the sample's info file, unlabelled.
-
-    Args:
-        cfg (Config): The config.
-        sample (SampleInfo): From
-            :func:`~projects.occ_common.datasets.single_sample.sample_info_file`.
-        data_root (str): Root of the info file's paths.
-
-    Returns:
-        BaseDataset: Its ``sample.index``-th item is the sample.
-    """
-    ds_cfg = copy.deepcopy(innermost_dataset(cfg.test_dataloader.dataset))
-    ds_cfg.update(
-        data_root=data_root,
-        ann_file=osp.abspath(sample.info_file),
-        test_mode=True,
-        load_interval=1,
-        pipeline=unlabelled_pipeline(ds_cfg['pipeline']))
-    return DATASETS.build(ds_cfg)
 
 
 def check_sample_files(dataset, sample: SampleInfo, info_file: str) -> None:
@@ -191,7 +162,8 @@ def inference_occupancy(model, dataset, index: int):
 
     Args:
         model (nn.Module): From :func:`init_model`.
-        dataset (BaseDataset): From :func:`build_sample_dataset`.
+        dataset (BaseDataset): From
+            :func:`~projects.occ_common.utils.unlabelled_pipeline.unlabelled_test_dataset`.
         index (int): The sample's index.
 
     Returns:
@@ -233,7 +205,8 @@ def main(argv=None):
             sample = sample_info_file(
                 args.info_file, data_root, tmp, args.sample_idx,
                 args.sample_token)
-            dataset = build_sample_dataset(cfg, sample, data_root)
+            dataset = unlabelled_test_dataset(cfg, sample.info_file,
+                                              data_root)
             check_sample_files(dataset, sample, args.info_file)
             model = init_model(cfg, args.checkpoint, args.device)
         except (FileNotFoundError, ValueError, RefusedGlobalError) as err:

@@ -1,5 +1,5 @@
 """OccCylindrical: camera + LiDAR occupancy through cylindrical TPV planes."""
-from typing import Dict, List, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 from mmdet3d.registry import MODELS
 from mmdet3d.structures import Det3DDataSample
@@ -156,6 +156,32 @@ class OccCylindrical(BaseOccDetector):
             empty_index=self.empty_index,
             ignore_index=self.ignore_index)
 
+    def lift_images(self, imgs: Tensor, lidar2img: Tensor,
+                    cam_params: Optional[Tensor]) -> Tuple[dict, Tensor]:
+        """Image encoder and DepthNet: every view's depth and context, and
+        where the frustum's points lie (steps 1-2).
+
+        Args:
+            imgs (Tensor): Normalised images. Shape (B, N, 3, H, W).
+            lidar2img (Tensor): Shape (B, N, 4, 4).
+            cam_params (Tensor, optional): BEVDepth's camera parameters
+                when DepthNet reads them. Shape (B*N, camera_param_dims).
+
+        Returns:
+            tuple: DepthNet's outputs (``depth`` Shape (B*N, D, h, w),
+            ``context`` Shape (B*N, C, h, w), ...) and the frustum's
+            points in the LiDAR frame, Shape (B, N, D, h, w, 3).
+        """
+        feats = self.img_encoder(imgs)
+        frustum = create_frustum(tuple(imgs.shape[-2:]), feats.shape[-2:],
+                                 self.depth_bound)
+        cam_points = frustum_to_lidar(frustum, lidar2img)
+        pos_embed = None
+        if self.depth_net.position_channels > 0:
+            pos_embed = cylindrical_position_embedding(
+                cam_points, self.cylinder.cyl_range)
+        return self.depth_net(feats, pos_embed, cam_params), cam_points
+
     def extract_feat(self, batch_inputs_dict: dict,
                      batch_data_samples: List[Det3DDataSample]) -> dict:
         """Run the network up to the head's logits.
@@ -187,17 +213,10 @@ class OccCylindrical(BaseOccDetector):
             raise ValueError(f'OccCylindrical: {num_cams} images but '
                              f'{lidar2img.shape[1]} camera matrices')
 
-        feats = self.img_encoder(imgs)
-        frustum = create_frustum(input_shape, feats.shape[-2:],
-                                 self.depth_bound)
-        cam_points = frustum_to_lidar(frustum, lidar2img)
-        pos_embed = cam_params = None
-        if self.depth_net.position_channels > 0:
-            pos_embed = cylindrical_position_embedding(
-                cam_points, self.cylinder.cyl_range)
+        cam_params = None
         if self.depth_net.camera_param_dims > 0:
             cam_params = self.camera_params(batch_data_samples, imgs.device)
-        out = self.depth_net(feats, pos_embed, cam_params)
+        out, cam_points = self.lift_images(imgs, lidar2img, cam_params)
         depth, context = out['depth'], out['context']
 
         # Points outside the cylinder could not reach any voxel.

@@ -127,8 +127,9 @@ def bev_pool_indices(coords: Tensor, batch_index: Tensor,
                        coords.new_tensor([size_x, size_y])).long()
     keep = ((cell >= 0) & (cell < cell.new_tensor([num_x, num_y]))).all(1)
     ix, iy = cell.unbind(1)
-    keep &= ((coords[:, 2] >= zmin) & (coords[:, 2] < zmax)
-             & (batch_index >= 0) & (batch_index < batch_size))
+    # Not in place: an exported graph has no in-place bitwise and.
+    keep = keep & ((coords[:, 2] >= zmin) & (coords[:, 2] < zmax)
+                   & (batch_index >= 0) & (batch_index < batch_size))
     if valid is not None:
         keep = keep & valid
     rank = (batch_index.long() * num_y + iy) * num_x + ix
@@ -162,13 +163,25 @@ def bev_pool(feats: Tensor, weights: Tensor,
         raise ValueError('bev_pool expects feats (Q, C) and weights (P,), '
                          f'got {tuple(feats.shape)} and '
                          f'{tuple(weights.shape)}')
-    num_y, num_x = indices.bev_shape
-    num_cells = indices.drop_cell
     contrib = feats[indices.feat_index] * weights[indices.weight_index,
                                                   None].to(feats.dtype)
     # One row more: the drop cell's, cut off below.
-    out = feats.new_zeros(num_cells + 1, feats.shape[1])
-    out = out.index_add(0, indices.bev_index, contrib)
+    out = feats.new_zeros(indices.drop_cell + 1, feats.shape[1])
+    if torch.onnx.is_in_onnx_export():
+        # The exporter writes index_add as a ScatterElements without
+        # reduction, where repeated cells overwrite each other; a
+        # scatter_add over the feature rows is ScatterElements(add).
+        return _to_bev(
+            out.scatter_add(0, indices.bev_index[:, None].expand_as(contrib),
+                            contrib), indices)
+    return _to_bev(out.index_add(0, indices.bev_index, contrib), indices)
+
+
+def _to_bev(out: Tensor, indices: BEVPoolIndices) -> Tensor:
+    """Cell rows (B * Y * X + 1, C), the drop cell last, as (B, C, Y, X).
+    """
+    num_y, num_x = indices.bev_shape
+    num_cells = indices.drop_cell
     return out[:num_cells].view(indices.batch_size, num_y, num_x,
                                 -1).permute(0, 3, 1, 2).contiguous()
 

@@ -19,6 +19,7 @@ from torch import Tensor
 
 from projects.occ_common.geometry.depth import (nearest_depth_map,
                                                 num_depth_bins)
+from projects.occ_common.geometry.inverse import invert_matrix
 from projects.occ_common.models.layers.camera_geometry import (
     device_frustum, frustum_to_lidar)
 from projects.occ_common.utils.device_path import accelerator_path
@@ -240,7 +241,7 @@ class SDGViewTransform(BaseModule):
         v = (row.to(depths.dtype) + 0.5) * (img_shape[0] / feat_h)
         d = depths.reshape(-1)[flat]
         homo = torch.stack([u * d, v * d, d, torch.ones_like(d)], dim=1)
-        img2lidar = torch.linalg.inv(lidar2img.double()).to(depths.dtype)
+        img2lidar = invert_matrix(lidar2img.double()).to(depths.dtype)
         coords = torch.einsum('pij,pj->pi',
                               img2lidar.reshape(-1, 4, 4)[cam], homo)[:, :3]
         return bev_pool_indices(

@@ -132,6 +132,13 @@ def _disc_sums_gathered(depth_pad: Tensor, seg_pad: Tensor, seg: Tensor,
 
     def windows(padded: Tensor) -> Tensor:
         # (N, H + 2r, W + 2r) -> (N, K, H, W), slot k = offsets[k].
+        if torch.onnx.is_in_onnx_export():
+            # The exporter's Unfold needs sizes it cannot read here; the
+            # K shifted slices are the same windows, value for value.
+            return torch.stack([
+                padded[:, reach + dp:reach + dp + height,
+                       reach + dq:reach + dq + width] for dp, dq in offsets
+            ], dim=1)
         win = padded.unfold(1, side, 1).unfold(2, side, 1)
         win = win.reshape(*win.shape[:3], side * side)
         return win.index_select(3, slots).permute(0, 3, 1, 2)

@@ -2,17 +2,19 @@
 
 :mod:`.depth` defines the depth bins and the sparse LiDAR depth maps;
 :mod:`.bev_warp` aligns a previous frame's BEV with the current frame;
-:mod:`.seg_targets` brings sparse 2-D semantic labels to feature resolution.
+:mod:`.seg_targets` brings sparse 2-D semantic labels to feature resolution;
+:mod:`.inverse` inverts 4x4 matrices in a form that exports to ONNX.
 """
 from .bev_warp import relative_pose, warp_bev
 from .depth import (depth_bin_values, depth_to_bins, nearest_depth_map,
                     num_depth_bins, patch_min_depth, project_nearest,
                     project_points)
+from .inverse import inverse_4x4, invert_matrix
 from .seg_targets import downsample_seg_labels
 
 __all__ = [
     'depth_bin_values', 'depth_to_bins', 'downsample_seg_labels',
-    'nearest_depth_map',
+    'inverse_4x4', 'invert_matrix', 'nearest_depth_map',
     'num_depth_bins', 'patch_min_depth', 'project_nearest', 'project_points',
     'relative_pose', 'warp_bev'
 ]

@@ -36,6 +36,13 @@ def real_sample_dir() -> Optional[str]:
         osp.join(REAL_SAMPLE_DIR, INFO_FILE)) else None
 
 
+def real_info_file() -> Optional[str]:
+    """The sample's info file, or None when it is not beside the
+    checkout."""
+    folder = real_sample_dir()
+    return None if folder is None else osp.join(folder, INFO_FILE)
+
+
 def load_info(path: Optional[str] = None) -> dict:
     """The sample's info entry (``data_list[0]``), read safely.
 

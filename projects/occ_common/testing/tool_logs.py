@@ -115,3 +115,23 @@ def make_converted_world(root: str, scenes: int, samples: int, sweeps: int,
     if proc.returncode != 0:
         raise RuntimeError(f'conversion failed: {proc.stderr[-3000:]}')
     return root.rstrip('/') + '/'
+
+
+def export_onnx_report(config: str, out: str,
+                       verify: Sequence[str]) -> Dict:
+    """``tools/deployment/export_onnx.py CONFIG none --out OUT --verify
+    ...`` in this process, its printing silenced.
+
+    Args:
+        config (str): Config file.
+        out (str): The ``.onnx`` file to write.
+        verify (Sequence[str]): ``--verify`` samples.
+
+    Returns:
+        dict: The tool's report (what it writes to ``FILE.json``).
+    """
+    import contextlib
+    import io
+    with contextlib.redirect_stdout(io.StringIO()):
+        return load_tool('tools/deployment/export_onnx.py').main(
+            [config, 'none', '--out', out, '--verify', *verify])

@@ -8,6 +8,8 @@ is scored, the metainfo it adds stays), and drops the steps that only read
 lidarseg labels or turn them into training targets (no prediction uses
 them). Like the tools, this module imports no plugin code.
 """
+import copy
+import os.path as osp
 from typing import List, Mapping, Sequence
 
 #: Test-pipeline steps that only read labels or make training targets from
@@ -52,3 +54,30 @@ def unlabelled_pipeline(pipeline: Sequence[Mapping]) -> List[dict]:
 
 
 __all__ = ['LABEL_ONLY_STEPS', 'innermost_dataset', 'unlabelled_pipeline']
+
+
+def unlabelled_test_dataset(cfg, info_file: str, data_root: str):
+    """The config's test dataset on another info file, unlabelled.
+
+    What ``demo/occ_demo.py`` and ``tools/deployment/export_onnx.py`` read
+    a user's sample through: the innermost test dataset of ``cfg`` with
+    ``info_file``, every sample (``load_interval=1``) and
+    :func:`unlabelled_pipeline`.
+
+    Args:
+        cfg (Config): The config.
+        info_file (str): Info file of the samples.
+        data_root (str): Root of the info file's paths.
+
+    Returns:
+        BaseDataset: The dataset.
+    """
+    from mmdet3d.registry import DATASETS
+    ds_cfg = copy.deepcopy(innermost_dataset(cfg.test_dataloader.dataset))
+    ds_cfg.update(
+        data_root=data_root,
+        ann_file=osp.abspath(info_file),
+        test_mode=True,
+        load_interval=1,
+        pipeline=unlabelled_pipeline(ds_cfg['pipeline']))
+    return DATASETS.build(ds_cfg)
