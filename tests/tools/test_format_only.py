@@ -115,6 +115,7 @@ def test_format_only_on_a_split_without_labels(world_copy, tmp_path,
             with np.load(path, allow_pickle=False) as data:
                 grid = data['semantics']
                 np.testing.assert_array_equal(data['arr_0'], grid)
+                np.testing.assert_array_equal(data['pred'], grid)
             assert grid.dtype == np.uint8 and grid.shape == (200, 200, 16)
             assert grid.max() <= 17
         else:

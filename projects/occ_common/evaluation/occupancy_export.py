@@ -7,10 +7,12 @@ converted into the other):
 * Occ3D (CVPR 2023 occupancy challenge): one ``<sample_token>.npz`` per
   key frame holding the uint8 labels (0 others .. 17 free), Shape
   (200, 200, 16), compressed. The challenge's own example writes the grid
-  as the archive's only, unnamed array (``arr_0``) and its ``labels.npz``
-  call it ``semantics``; each file holds both names, so a reader of either
-  finds it (a mostly free grid compresses to a few kB, so the copy costs
-  little). The server takes one ``.zip`` of the folder, written beside it.
+  as the archive's only, unnamed array (``arr_0``), its ``labels.npz``
+  call it ``semantics``, and SparseOcc's RayIoU script (``ray_metrics.py
+  --pred-dir``) reads ``pred``; each file holds all three names, so a
+  reader of any finds it (a mostly free grid compresses to a few kB, so
+  the copies cost little). The server takes one ``.zip`` of the folder,
+  written beside it.
 * SurroundOcc: one ``<LiDAR file name>.npy`` per key frame in the layout of
   SurroundOcc's own label files, the (N, 4) rows ``x, y, z, label`` of the
   occupied voxels (uint8 while indices fit: 200 x 200 x 16), so every reader
@@ -32,7 +34,7 @@ from typing import Iterable
 import numpy as np
 
 #: Keys of the grid in an Occ3D prediction file (see the module docstring).
-OCC3D_PRED_KEYS = ('semantics', 'arr_0')
+OCC3D_PRED_KEYS = ('semantics', 'arr_0', 'pred')
 
 
 def _uint8_grid(pred, name: str) -> np.ndarray:

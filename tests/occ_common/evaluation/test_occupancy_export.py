@@ -27,13 +27,14 @@ def _occ3d_grid(seed: int = 0) -> np.ndarray:
 
 def test_occ3d_file_layout(tmp_path):
     """<token>.npz with uint8 (200, 200, 16) 'semantics' and the same grid
-    as the challenge example's unnamed 'arr_0'; small (compressed)."""
+    as the challenge example's unnamed 'arr_0' and as the 'pred' SparseOcc's
+    RayIoU script reads; small (compressed)."""
     pred = _occ3d_grid()
     path = write_occ3d_prediction(str(tmp_path), 'abc123', torch.from_numpy(
         pred))
     assert path == str(tmp_path / 'abc123.npz')
     with np.load(path, allow_pickle=False) as data:
-        assert sorted(data.files) == ['arr_0', 'semantics']
+        assert sorted(data.files) == ['arr_0', 'pred', 'semantics']
         for key in data.files:
             assert data[key].dtype == np.uint8
             assert data[key].shape == SHAPE
