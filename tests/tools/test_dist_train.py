@@ -2,8 +2,9 @@
 
 tools/dist_train.sh trains the toy config with 2 ranks; tools/dist_test.sh
 evaluates the checkpoint with 2 ranks, each seeing half of the 4 val
-samples; the metric gathered across ranks must equal single-process
-tools/test.py on the same checkpoint, to the last digit of the json log.
+samples; the metrics gathered across ranks (the voxel metric's confusion
+matrix and RayIoU's ray counts) must equal single-process tools/test.py
+on the same checkpoint, to the last digit of the json log.
 """
 import os
 import os.path as osp
@@ -17,6 +18,8 @@ from projects.occ_common.testing.tool_logs import last_test_metrics
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ.py')
+#: The same model, tested with RayIoU beside the voxel metric.
+RAY_CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ_rayiou.py')
 
 
 def _run(cmd, env=None):
@@ -48,7 +51,8 @@ def test_two_rank_train_then_gathered_metric_equals_single_process(
 
     Testing: 4 samples / (2 ranks x batch 2) = 1 iteration per rank, so
     the 2-rank log shows [1/1] where the single process shows [2/2], and
-    OccupancyMetric sums the confusion matrices of both ranks.
+    OccupancyMetric sums the confusion matrices of both ranks and
+    OccRayIoUMetric pools their ray counts before dividing.
     """
     work_dir = str(tmp_path / 'train')
     proc = _run([
@@ -63,20 +67,21 @@ def test_two_rank_train_then_gathered_metric_equals_single_process(
 
     dist_dir = str(tmp_path / 'dist_test')
     proc = _run([
-        'bash', osp.join(ROOT, 'tools', 'dist_test.sh'), CONFIG, checkpoint,
-        '2', '--work-dir', dist_dir
+        'bash', osp.join(ROOT, 'tools', 'dist_test.sh'), RAY_CONFIG,
+        checkpoint, '2', '--work-dir', dist_dir
     ], env=dict(PORT=str(free_port())))
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-4000:]
     assert 'Epoch(test) [1/1]' in proc.stdout + proc.stderr
 
     single_dir = str(tmp_path / 'single_test')
     proc = _run([
-        sys.executable, osp.join(ROOT, 'tools', 'test.py'), CONFIG,
+        sys.executable, osp.join(ROOT, 'tools', 'test.py'), RAY_CONFIG,
         checkpoint, '--work-dir', single_dir
     ])
     assert proc.returncode == 0, proc.stderr[-4000:]
     assert 'Epoch(test) [2/2]' in proc.stdout + proc.stderr
 
     gathered, single = _metrics(dist_dir), _metrics(single_dir)
-    assert {'occ/IoU', 'occ/mIoU', 'occ/car', 'occ/road'} <= set(single)
+    assert {'occ/IoU', 'occ/mIoU', 'occ/car', 'occ/road', 'occ/RayIoU',
+            'occ/RayIoU@1', 'occ/RayIoU/car'} <= set(single)
     assert gathered == single

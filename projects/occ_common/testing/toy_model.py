@@ -7,6 +7,7 @@ only when this module is imported (a test config lists it in
 """
 from typing import List, Optional, Sequence, Tuple, Union
 
+import numpy as np
 import torch
 from mmdet3d.registry import DATASETS, MODELS
 from mmengine.dataset import BaseDataset
@@ -28,6 +29,9 @@ class ToyOccupancyDataset(BaseDataset):
         num_classes (int): Number of classes, 0 = empty. Defaults to 3.
         noise (float): Feature noise. Defaults to 0.5.
         seed (int): Base seed. Defaults to 0.
+        ray_origins (Sequence[Sequence[float]], optional): RayIoU's ray
+            origins (T, 3), metres, given to every sample as the metainfo
+            ``ray_origins``. Defaults to None (none).
     """
 
     METAINFO = dict(classes=('empty', 'car', 'road'))
@@ -38,8 +42,11 @@ class ToyOccupancyDataset(BaseDataset):
                  num_classes: int = 3,
                  noise: float = 0.5,
                  seed: int = 0,
+                 ray_origins: Optional[Sequence[Sequence[float]]] = None,
                  **kwargs) -> None:
         self.num_samples = num_samples
+        self.ray_origins = None if ray_origins is None else np.asarray(
+            ray_origins, dtype=np.float64).reshape(-1, 3)
         self.occ_shape = tuple(occ_shape)
         self.num_classes = num_classes
         self.noise = noise
@@ -66,8 +73,10 @@ class ToyOccupancyDataset(BaseDataset):
     def prepare_data(self, idx: int) -> dict:
         """Return ``dict(inputs, data_samples)`` as the pack transforms do."""
         info = self.get_data_info(idx)
-        sample = BaseDataElement(
-            metainfo=dict(sample_idx=info['sample_idx']))
+        metainfo = dict(sample_idx=info['sample_idx'])
+        if self.ray_origins is not None:
+            metainfo['ray_origins'] = self.ray_origins
+        sample = BaseDataElement(metainfo=metainfo)
         sample.gt_occ = info['gt_occ']
         return dict(inputs=info['inputs'], data_samples=sample)
 
