@@ -3,6 +3,7 @@ import pytest
 import torch
 
 from projects.sdg_occ import FOADDistillLoss, foad_weights
+from projects.sdg_occ.foad import standardize_channels
 
 
 def _masks():
@@ -83,3 +84,51 @@ def test_bad_inputs_raise():
     with pytest.raises(ValueError, match='masks must be'):
         FOADDistillLoss()(
             torch.zeros(2, 2, 2, 2), torch.zeros(2, 2, 2, 2), fused, img)
+
+
+def test_standardize_channels_by_hand():
+    """One channel 1, 3, 5, 100 on a 1 x 4 map, the last cell outside.
+
+    Over the three cells: mean 3, variance (4 + 0 + 4) / 3 = 8 / 3, so
+    1 -> -2 / sqrt(8/3) = -1.2247, 3 -> 0, 5 -> 1.2247, and the outside
+    cell is shifted and scaled alike: 97 / sqrt(8/3) = 59.4001.
+    """
+    feats = torch.tensor([1.0, 3.0, 5.0, 100.0]).view(1, 1, 1, 4)
+    cells = torch.tensor([True, True, True, False]).view(1, 1, 1, 4)
+    out = standardize_channels(feats, cells, eps=0.0)
+    expected = torch.tensor([-1.2247, 0.0, 1.2247, 59.4001]).view(1, 1, 1, 4)
+    torch.testing.assert_close(out, expected, atol=1e-4, rtol=0)
+
+
+def test_channel_normalisation_compares_patterns_not_scales():
+    """A student that is the teacher times 4.2 plus 3 per channel (the
+    scale gap the tiny SDG-KL starts with) costs 0 once standardised;
+    as written, eq. 8 charges mean((3.2 T + 3)^2) for it. A student of
+    the teacher's sign flipped costs the largest value, 2 (1 - (-1)) = 4
+    on every active cell and channel (alpha 1, no inactive cell)."""
+    gen = torch.Generator().manual_seed(0)
+    teacher = torch.rand(2, 3, 4, 5, generator=gen)
+    cells = torch.ones(2, 1, 4, 5, dtype=torch.bool)
+    scaled = 4.2 * teacher + 3.0
+    normalised = FOADDistillLoss(normalize='channel')
+    assert normalised(scaled, teacher, cells, cells).item() < 1e-4
+    raw = FOADDistillLoss()(scaled, teacher, cells, cells)
+    torch.testing.assert_close(raw, (3.2 * teacher + 3.0).pow(2).mean())
+    flipped = normalised(-teacher, teacher, cells, cells)
+    torch.testing.assert_close(flipped, torch.tensor(4.0), atol=1e-3,
+                               rtol=0)
+
+
+def test_channel_statistics_come_from_the_teacher_cells_only():
+    """Cells outside the fused mask change neither the statistics nor the
+    loss: a student equal to the teacher there, anything elsewhere."""
+    fused, img = _masks()
+    gen = torch.Generator().manual_seed(1)
+    teacher = torch.randn(2, 2, 2, 3, generator=gen)
+    student = teacher.clone()
+    student[~fused.expand(-1, 2, -1, -1)] = 1e3
+    loss = FOADDistillLoss(normalize='channel')(student, teacher, fused,
+                                                img)
+    assert loss.item() < 1e-6
+    with pytest.raises(ValueError, match="normalize must be one of"):
+        FOADDistillLoss(normalize='batch')

@@ -270,6 +270,9 @@ _CAMERA_OFF = dict(variant='camera', lidar_encoder=None, fusion=None,
     ('sdg-kl-small-sharedhead', dict(separate_teacher_head=False)),
     ('sdg-kl-small-sharedhead-detachcam',
      dict(separate_teacher_head=False, detach_teacher_camera=True)),
+    ('sdg-kl-small-norm',
+     dict(loss_distill=dict(type='FOADDistillLoss', alpha=1.0, beta=1.0,
+                            loss_weight=1.0, normalize='channel'))),
 ])
 def test_ablation_runs_switch_their_module_off(name, expect):
     """Each named ablation run is its base config with only the named

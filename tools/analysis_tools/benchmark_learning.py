@@ -115,6 +115,11 @@ RUNS.update({
         ]),
     'sdg-fusion-small': (_SDG_SMALL.format('fusion'), []),
     'sdg-kl-small': (_SDG_SMALL.format('kl'), []),
+    # ... distilling standardised features (FOADDistillLoss's docstring:
+    # eq. 8 on the raw ones pulled 7-13x harder than the occupancy loss
+    # at initialisation; issue 47).
+    'sdg-kl-small-norm': (_SDG_SMALL.format('kl'),
+                          ['model.loss_distill.normalize=channel']),
     'sdg-camera-lss-small': (_SDG_SMALL.format('fusion'), _CAMERA_LSS),
     'sdg-camera-sdg-small': (_SDG_SMALL.format('fusion'), _CAMERA_SDG),
     # SDG-KL whose teacher decodes with the student's BEV encoder and
