@@ -1,8 +1,12 @@
-# SDG-OCC Table 3, Baseline (37.84 mIoU, FlashOcc's camera-only R50 model):
-# the plain LSS lift, no LiDAR encoder, no fusion; predict needs no LiDAR
-# points. Without SDG nothing uses the 2D semantics, so the DepthNet has no
-# semantic head and no loss_seg (FlashOcc has none); its depth supervision
-# stays (FlashOcc's BEVDepth-style DepthNet has it).
+# SDG-OCC Table 3's Baseline row in FlashOcc M1's setting: the plain LSS
+# lift, no LiDAR encoder, no fusion; predict needs no LiDAR points. Single
+# frame without stereo, this is FlashOcc M1 (ResNet-50, 32.08 mIoU in
+# FlashOcc's table). Table 3's 37.84 is FlashOcc M2, which adds 4D stereo
+# over one adjacent frame: two-frame rows would need this repository's
+# temporal machinery, and stereo is out of scope (issue 47). Without SDG
+# nothing uses the 2D semantics, so the DepthNet has no semantic head and
+# no loss_seg (FlashOcc has none); its depth supervision stays (FlashOcc's
+# BEVDepth-style DepthNet has it).
 _base_ = ['../sdgocc-fusion_r50_4xb2-24e_occ3d-nus.py']
 
 model = dict(
