@@ -18,6 +18,7 @@ from projects.occ_common.testing.tool_logs import (REPO_ROOT,
                                                    make_converted_world,
                                                    mean_of_class_ious,
                                                    run_tool, train_losses)
+from projects.occ_common.utils.tool_runs import data_options
 
 TINY = sorted(
     glob.glob(osp.join(REPO_ROOT, 'configs', '*', '*_tiny_*.py')))
@@ -45,29 +46,6 @@ def test_every_model_has_a_tiny_config():
     ]
 
 
-def data_root_options(path, root):
-    """``--cfg-options`` that point a config's datasets, and the evaluators
-    that read an info file themselves (RayIoU's origins), at ``root``."""
-    cfg = Config.fromfile(path)
-    options = [
-        f'{split}_dataloader.dataset.data_root={root}'
-        for split in ('train', 'val', 'test')
-    ]
-    for split in ('val', 'test'):
-        evaluators = cfg[f'{split}_evaluator']
-        if isinstance(evaluators, dict):
-            evaluators = [evaluators]
-            keys = [f'{split}_evaluator']
-        else:
-            keys = [f'{split}_evaluator.{i}' for i in range(len(evaluators))]
-        options += [
-            f'{key}.data_root={root}'
-            for key, evaluator in zip(keys, evaluators)
-            if 'data_root' in evaluator
-        ]
-    return options
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize('path', [p for p in TINY if p not in NOMASK],
                          ids=lambda p: osp.basename(p)[:-3])
@@ -75,7 +53,7 @@ def test_tiny_config_trains_and_tests(path, synthetic_root, tmp_path):
     """The loss falls over 4 epochs of 2 samples (the mean of the last two
     iterations is below that of the first two) and tools/test.py reports
     IoU and mIoU through OccupancyMetric."""
-    data = data_root_options(path, synthetic_root)
+    data = data_options(synthetic_root, path)
     work_dir = str(tmp_path / 'work')
     proc = run_tool('tools/train.py', path, '--work-dir', work_dir,
                     '--cfg-options', 'train_cfg.max_epochs=4',
@@ -103,7 +81,7 @@ def test_nomask_config_tests_with_rayiou(path, synthetic_root, tmp_path):
     torch.save(dict(state_dict=MODELS.build(cfg.model).state_dict()),
                checkpoint)
     metrics = _test_and_check(path, checkpoint,
-                              data_root_options(path, synthetic_root),
+                              data_options(synthetic_root, path),
                               str(tmp_path / 'test'))
     assert 'occ/RayIoU' in metrics
 

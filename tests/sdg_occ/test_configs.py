@@ -77,6 +77,10 @@ DELTAS = {
     # and a longer schedule (data and schedule only), and its SDG-KL.
     _small('fusion'): (TINY_FUSION, set()),
     _small('kl'): (_small('fusion'), KL_KEYS),
+    _small('fusion').replace('occ3d-nus', 'occ3d-nus-nomask'): (
+        _small('fusion'), {'loss_mask_key'}),
+    _small('kl').replace('occ3d-nus', 'occ3d-nus-nomask'): (
+        _small('kl'), {'loss_mask_key'}),
     # The temporal variants (T = 2): the frame count, nothing else.
     _main('fusion-2f', 'occ3d-nus'): (FUSION, {'num_frames'}),
     _tiny('fusion-2f'): (TINY_FUSION, {'num_frames'}),

@@ -204,6 +204,25 @@ def test_format_table_extra_lines():
         '| **mIoU** | 12.35 |', '| iterations | 7 |', '| car | n/a |']
 
 
+def test_ray_iou_gets_one_line_and_no_class_lines():
+    """RayIoUMetric's keys (occ/RayIoU, @1/@2/@4 and per class) make one
+    line, 'mean (@1 / @2 / @4)', after the mIoU; a row without RayIoU
+    reads n/a there; the per-class RayIoU keys are not class lines."""
+    ray = {'occ/RayIoU': 30.0, 'occ/RayIoU@1': 20.0, 'occ/RayIoU@2': 30.0,
+           'occ/RayIoU@4': 40.0, 'occ/RayIoU/car': 7.0,
+           'occ/RayIoU@1/car': 5.0}
+    rows = [dict(name='a', labels='Occ3D, no mask', train_s=60.0,
+                 metrics={'occ/IoU': 50.0, 'occ/mIoU': 12.0,
+                          'occ/car': 3.0, **ray}),
+            dict(name='b', labels='Occ3D', train_s=60.0,
+                 metrics={'occ/IoU': 40.0, 'occ/mIoU': 10.0,
+                          'occ/car': 2.0})]
+    assert tool_runs.class_keys(rows) == ['car']
+    assert tool_runs.format_table(rows).splitlines()[6:] == [
+        '| RayIoU (@1 / @2 / @4 m) | 30.00 (20.00 / 30.00 / 40.00) | n/a |',
+        '| car | 3.00 | 2.00 |']
+
+
 def test_class_lines_show_gt_voxels_and_weak_large_classes():
     """With the metric's GT counts a class cell reads 'IoU (GT voxels)';
     the large-class line names the classes of >= 1,000 GT voxels at IoU

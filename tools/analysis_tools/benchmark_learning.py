@@ -40,13 +40,16 @@ import sys
 import time
 from typing import Dict, List, Optional
 
+from mmengine import Config
+
 from projects.occ_common.evaluation import (largest_confusions,
                                             read_confusion_csv)
 from projects.occ_common.utils.tool_runs import (LARGE_CLASS_MIN_IOU,
                                                  LARGE_CLASS_VOXELS,
-                                                 data_options, format_table,
-                                                 large_classes, last_metrics,
-                                                 load_tool, pct, prepare_world,
+                                                 data_options, evaluator_keys,
+                                                 format_table, large_classes,
+                                                 last_metrics, load_tool, pct,
+                                                 prepare_world,
                                                  read_json_lines, run,
                                                  stretched_times, tool)
 
@@ -88,6 +91,7 @@ _OCC_SMALL = ('configs/occ_cyl/'
 _OCC_SMALL_SEG2D = ('configs/occ_cyl/'
                     'occcyl-seg2d_small_1xb1-12e_surroundocc-nus-synthetic.py')
 _SDG_SMALL = 'configs/sdg_occ/sdgocc-{}_small_1xb1-20e_occ3d-nus-synthetic.py'
+_SDG_SMALL_NOMASK = _SDG_SMALL.replace('-nus-', '-nus-nomask-')
 RUNS.update({
     'occcyl-small': (_OCC_SMALL, []),
     'occcyl-small-nodepthsup': (_OCC_SMALL, ['model.loss_depth=None']),
@@ -120,6 +124,10 @@ RUNS.update({
     # at initialisation; issue 47).
     'sdg-kl-small-norm': (_SDG_SMALL.format('kl'),
                           ['model.loss_distill.normalize=channel']),
+    # Issue 49: trained without the camera mask, scored with RayIoU beside
+    # the camera-mask mIoU.
+    'sdg-fusion-small-nomask': (_SDG_SMALL_NOMASK.format('fusion'), []),
+    'sdg-kl-small-nomask': (_SDG_SMALL_NOMASK.format('kl'), []),
     'sdg-camera-lss-small': (_SDG_SMALL.format('fusion'), _CAMERA_LSS),
     'sdg-camera-sdg-small': (_SDG_SMALL.format('fusion'), _CAMERA_SDG),
     # SDG-KL whose teacher decodes with the student's BEV encoder and
@@ -368,6 +376,22 @@ def _seconds(minutes: Optional[float]) -> Optional[float]:
     return None if minutes is None else 60.0 * minutes
 
 
+def _labels(cfg) -> str:
+    """The ground truth a config trains on, for the table's header line:
+    ``'SurroundOcc'``, ``'Occ3D'`` or ``'Occ3D, no mask'`` (the loss sees
+    every voxel, not only the camera-visible ones)."""
+    conventions = [
+        evaluator.get('convention')
+        for _, evaluator in evaluator_keys(cfg, 'val')
+        if evaluator.get('type') == 'OccupancyMetric'
+    ]
+    labels = dict(surroundocc='SurroundOcc', occ3d='Occ3D').get(
+        conventions[0] if conventions else None, 'unknown')
+    if labels == 'Occ3D' and cfg.model.get('loss_mask_key') is None:
+        labels += ', no mask'
+    return labels
+
+
 def train_one(spec: dict) -> None:
     """Train one run (in the child process); see :func:`bench_run`."""
     train_tool = load_tool('tools/train.py')
@@ -391,10 +415,8 @@ def train_one(spec: dict) -> None:
                           osp.join(work_dir, CLOCK),
                           _seconds(spec.get('max_cpu_minutes'))))
     runner.register_hook(_initial_val_hook())
-    evaluator = cfg.val_evaluator
     info = dict(
-        labels=dict(surroundocc='SurroundOcc', occ3d='Occ3D').get(
-            evaluator.get('convention'), str(evaluator.get('type'))),
+        labels=_labels(cfg),
         params=sum(p.numel() for p in runner.model.parameters()),
         epoch_length=epoch_length, train_samples=len(dataset),
         batch_size=loader.batch_size, max_iters=max_iters,
@@ -478,6 +500,17 @@ def _last_checkpoint(work_dir: str) -> str:
         return f.read().strip()
 
 
+def _occupancy_metric_key(config: str) -> str:
+    """The ``--cfg-options`` key of the config's test OccupancyMetric."""
+    keys = [key for key, evaluator in evaluator_keys(
+        Config.fromfile(config), 'test')
+            if evaluator['type'] == 'OccupancyMetric']
+    if len(keys) != 1:
+        raise SystemExit(f'{config}: expected one OccupancyMetric in '
+                         f'test_evaluator, found {len(keys)}')
+    return keys[0]
+
+
 def bench_run(name: str, config: str, options: List[str], args,
               data_root: Optional[str], out: str, log_path: str) -> dict:
     """Train (or resume, or reuse) one run and evaluate it.
@@ -492,7 +525,7 @@ def bench_run(name: str, config: str, options: List[str], args,
     run_dir = osp.join(out, 'runs', name)
     work_dir = osp.join(run_dir, 'train')
     if data_root is not None:
-        options = data_options(data_root) + options
+        options = data_options(data_root, config) + options
     settings = dict(config=config, options=options, iters=args.iters,
                     val_interval=args.val_interval,
                     max_minutes=args.max_minutes,
@@ -529,9 +562,10 @@ def bench_run(name: str, config: str, options: List[str], args,
     # The GT voxels of every class, for the table's large-class line, and
     # the confusion matrix, for where the weak classes' voxels go.
     confusion_csv = osp.join(run_dir, CONFUSION)
+    occ_metric = _occupancy_metric_key(config)
     test_options = list(options) + [
-        'test_evaluator.class_voxel_counts=True',
-        f'test_evaluator.confusion_file={confusion_csv}'
+        f'{occ_metric}.class_voxel_counts=True',
+        f'{occ_metric}.confusion_file={confusion_csv}'
     ]
     if args.pictures > 0:
         # Spread the pictures over the val split (its length is known from

@@ -18,6 +18,8 @@ import sys
 from types import ModuleType
 from typing import Dict, List, Optional, Sequence
 
+from mmengine import Config
+
 #: The repository root (projects/occ_common/utils/ -> three levels up).
 ROOT = osp.dirname(
     osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__)))))
@@ -186,13 +188,45 @@ def prepare_world(data_root: str,
         run(cmd, log_path, 'conversion')
 
 
-def data_options(data_root: str) -> List[str]:
-    """``--cfg-options`` pointing every dataloader at ``data_root``."""
+def evaluator_keys(cfg, split: str) -> List[tuple]:
+    """``(option key, evaluator config)`` of every evaluator of a split.
+
+    Args:
+        cfg (mmengine.Config): A loaded config.
+        split (str): ``'val'`` or ``'test'``.
+
+    Returns:
+        list[tuple]: ``('test_evaluator', cfg)`` for a single evaluator,
+        ``('test_evaluator.i', cfg_i)`` for each of a list.
+    """
+    evaluators = cfg[f'{split}_evaluator']
+    if isinstance(evaluators, dict):
+        return [(f'{split}_evaluator', evaluators)]
+    return [(f'{split}_evaluator.{i}', evaluator)
+            for i, evaluator in enumerate(evaluators)]
+
+
+def data_options(data_root: str, config: Optional[str] = None) -> List[str]:
+    """``--cfg-options`` pointing every dataloader at ``data_root``.
+
+    Args:
+        data_root (str): The dataset folder.
+        config (str, optional): With a config file, also the evaluators
+            that read an info file themselves (RayIoU's origins).
+    """
     root = data_root.rstrip('/') + '/'
-    return [
+    options = [
         f'{split}_dataloader.dataset.data_root={root}'
         for split in ('train', 'val', 'test')
     ]
+    if config is not None:
+        cfg = Config.fromfile(config)
+        options += [
+            f'{key}.data_root={root}' for split in ('val', 'test')
+            for key, evaluator in evaluator_keys(cfg, split)
+            if 'data_root' in evaluator
+        ]
+    return options
 
 
 def read_json_lines(path: str) -> List[dict]:
@@ -219,13 +253,16 @@ def last_metrics(work_dir: str) -> Dict[str, float]:
 
 
 def class_keys(rows: Sequence[dict]) -> List[str]:
-    """Per-class metric names (``occ/<class>``) of the rows, in order."""
+    """Per-class metric names (``occ/<class>``) of the rows, in order
+    (RayIoU's own keys are not classes: the table gives them a line)."""
     classes = []
     for r in rows:
         for key in r['metrics']:
             name = key[len('occ/'):]
             if (key.startswith('occ/') and '/' not in name
-                    and name not in ('IoU', 'mIoU') and name not in classes):
+                    and name not in ('IoU', 'mIoU')
+                    and not name.startswith('RayIoU')
+                    and name not in classes):
                 classes.append(name)
     return classes
 
@@ -265,6 +302,14 @@ def pct(value) -> str:
     return 'n/a' if value is None or value != value else f'{value:.2f}'
 
 
+def ray_iou_cell(metrics: Dict[str, float]) -> str:
+    """``'RayIoU (@1 / @2 / @4)'`` of a row, ``n/a`` without RayIoU."""
+    if 'occ/RayIoU' not in metrics:
+        return 'n/a'
+    return (pct(metrics['occ/RayIoU']) + ' (' + ' / '.join(
+        pct(metrics.get(f'occ/RayIoU@{tau}')) for tau in (1, 2, 4)) + ')')
+
+
 def format_table(rows: List[dict], extra: Sequence[tuple] = ()) -> str:
     """Markdown table: one column per row (model), one line per metric.
 
@@ -288,6 +333,9 @@ def format_table(rows: List[dict], extra: Sequence[tuple] = ()) -> str:
     add('train time', [f'{r["train_s"] / 60:.1f} min' for r in rows])
     add('IoU', [pct(r['metrics'].get('occ/IoU')) for r in rows])
     add('**mIoU**', [pct(r['metrics'].get('occ/mIoU')) for r in rows])
+    if any('occ/RayIoU' in r['metrics'] for r in rows):
+        add('RayIoU (@1 / @2 / @4 m)', [ray_iou_cell(r['metrics'])
+                                        for r in rows])
     for label, fn in extra:
         add(label, [fn(r) for r in rows])
     for name in class_keys(rows):
