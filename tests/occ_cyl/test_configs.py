@@ -30,6 +30,8 @@ NOMASK = osp.join(CONFIG_DIR,
 TINY = osp.join(CONFIG_DIR, 'occcyl_tiny_1xb1-6e_surroundocc-nus-synthetic.py')
 SMALL = osp.join(CONFIG_DIR,
                  'occcyl_small_1xb1-12e_surroundocc-nus-synthetic.py')
+SMALL_OCC3D = osp.join(
+    CONFIG_DIR, 'occcyl_small_1xb1-12e_occ3d-nus-nomask-synthetic.py')
 SEG2D = osp.join(CONFIG_DIR,
                  'occcyl-seg2d_small_1xb1-12e_surroundocc-nus-synthetic.py')
 
@@ -70,6 +72,9 @@ DELTAS = {
         'tpv_encoder.neck.out_channels', 'tpv_fusion.cam_channels',
         'tpv_fusion.lidar_channels', 'tpv_fusion.plane_channels'
     }),
+    # The learning benchmark's RayIoU row (issue 49): the small model on
+    # Occ3D's grid and classes, trained on whole grids as SMALL is.
+    SMALL_OCC3D: (SMALL, COUPLED),
     # Not in the paper: the small model with a 2-D semantic head and loss.
     SEG2D: (SMALL, {
         'depth_net.seg_channels', 'loss_seg.type', 'loss_seg.ignore_index',
@@ -95,14 +100,19 @@ def test_config_inventory():
     """The paper's config, its Occ3D variant (also without the camera
     mask, for RayIoU), the lighter model, the tiny
     and small synthetic configs (the small one also with a 2-D semantic
-    target) and the deltas of Tables V (3 files), VI (2) and VII (3)."""
-    assert set(MAIN) == {PAPER, OCC3D, NOMASK, LITE, TINY, SMALL, SEG2D}
+    target, and on Occ3D without the mask) and the deltas of Tables V (3
+    files), VI (2) and VII (3)."""
+    assert set(MAIN) == {
+        PAPER, OCC3D, NOMASK, LITE, TINY, SMALL, SMALL_OCC3D, SEG2D
+    }
     assert ({_name(p) for p in ABLATIONS}
-            | {PAPER, OCC3D, NOMASK, LITE, SMALL, SEG2D} == set(DELTAS))
+            | {PAPER, OCC3D, NOMASK, LITE, SMALL, SMALL_OCC3D, SEG2D}
+            == set(DELTAS))
 
 
 @pytest.mark.parametrize(
-    'path', [PAPER, OCC3D, NOMASK, LITE, SMALL, SEG2D] + ABLATIONS,
+    'path',
+    [PAPER, OCC3D, NOMASK, LITE, SMALL, SMALL_OCC3D, SEG2D] + ABLATIONS,
     ids=lambda p: osp.basename(p)[:-3])
 def test_each_delta_changes_only_its_documented_keys(path):
     """Compared with the config it builds on, a config changes exactly the
@@ -120,6 +130,29 @@ def test_coupled_values_come_from_the_dataset_base(path):
     assert coupled_value_mismatches(cfg, 'occ_cyl') == []
     aug = [t for t in cfg.train_pipeline if t.type == 'MultiViewImageAug']
     assert aug[0].final_size == cfg.img_size
+
+
+def test_small_occ3d_config_has_occ3d_data_and_metric():
+    """The small config switched to Occ3D loads, transforms and scores the
+    labels as the paper's Occ3D config does (the same label, frame and
+    crop steps in the same order, the same dataset keys, the same voxel
+    metric), and adds RayIoU. Its augmentations stay the small config's."""
+    small, paper = Config.fromfile(SMALL_OCC3D), Config.fromfile(OCC3D)
+    task_steps = ('LoadOccupancyGT', 'PointsToEgoFrame', 'PointsRangeFilter')
+
+    def label_steps(pipeline):
+        return [dict(t) for t in pipeline if t['type'] in task_steps]
+
+    for split in ('train', 'test'):
+        steps = label_steps(small[f'{split}_pipeline'])
+        assert [t['type'] for t in steps] == list(task_steps)
+        assert steps == label_steps(paper[f'{split}_pipeline']), split
+    for key in ('occ_format', 'metainfo'):
+        assert (small.train_dataloader.dataset[key] ==
+                paper.train_dataloader.dataset[key])
+    voxel_metric, ray_metric = small.val_evaluator
+    assert dict(voxel_metric) == dict(paper.val_evaluator)
+    assert ray_metric.type == 'OccRayIoUMetric'
 
 
 def test_ablation_knobs():

@@ -95,6 +95,10 @@ _SDG_SMALL_NOMASK = _SDG_SMALL.replace('-nus-', '-nus-nomask-')
 RUNS.update({
     'occcyl-small': (_OCC_SMALL, []),
     'occcyl-small-nodepthsup': (_OCC_SMALL, ['model.loss_depth=None']),
+    # Issue 49: on Occ3D labels without the camera mask, scored with
+    # RayIoU beside the camera-mask mIoU.
+    'occcyl-small-occ3d-nomask': (_OCC_SMALL.replace(
+        'surroundocc-nus', 'occ3d-nus-nomask'), []),
     # A cylinder of twice the small config's radial and angular cells:
     # the held-out ground truth kept at the majority class of each cell
     # scores 89.5 mIoU on it against 69.3 on 64 x 128 x 16.

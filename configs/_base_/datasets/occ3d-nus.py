@@ -1,27 +1,20 @@
-# nuScenes + Occ3D-nuScenes occupancy labels (200x200x16, 0.4 m, ego frame).
-# For the synthetic world use occ3d-nus-synthetic.py (or override
-# data_root). The grid and classes below are the coupled values of every
-# model config on this dataset: they take them from occ_task.
-_base_ = ['./nus-occ-common.py']
+# nuScenes + Occ3D-nuScenes occupancy labels (200x200x16, 0.4 m, ego frame;
+# the task's facts: occ3d-task.py). For the synthetic world use
+# occ3d-nus-synthetic.py (or override data_root). The grid and classes
+# below are the coupled values of every model config on this dataset: they
+# take them from occ_task.
+_base_ = ['./nus-occ-common.py', './occ3d-task.py']
 
-occ_format = 'occ3d'
-# Occ3D-nuScenes' fixed grid (Tian et al., NeurIPS 2023): x, y in
-# [-40, 40] m, z in [-1, 5.4] m, 0.4 m voxels, in the ego frame.
-point_cloud_range = [-40.0, -40.0, -1.0, 40.0, 40.0, 5.4]
-voxel_size = [0.4, 0.4, 0.4]
+occ_format = _base_.occ3d.occ_format
+point_cloud_range = _base_.occ3d.point_cloud_range
+voxel_size = _base_.occ3d.voxel_size
 grid_size = [
     round((point_cloud_range[i + 3] - point_cloud_range[i]) / voxel_size[i])
     for i in range(3)
 ]  # [200, 200, 16]
-# 'others' (label 0), the 16 nuScenes-lidarseg classes (1..16), 'free' (17).
-class_names = [
-    'others', 'barrier', 'bicycle', 'bus', 'car', 'construction_vehicle',
-    'motorcycle', 'pedestrian', 'traffic_cone', 'trailer', 'truck',
-    'driveable_surface', 'other_flat', 'sidewalk', 'terrain', 'manmade',
-    'vegetation', 'free'
-]
+class_names = _base_.occ3d.class_names
 num_classes = len(class_names)
-empty_index = class_names.index('free')
+empty_index = class_names.index(_base_.occ3d.empty_class)
 # What every model config on this dataset merges into its `model` (the task
 # arguments of the occupancy detectors): the grid, the classes, the empty
 # label and, as the metric counts only camera-visible voxels, only those
@@ -33,12 +26,7 @@ occ_task = dict(
     empty_index=empty_index,
     loss_mask_key='mask_camera')
 
-_labels = [
-    dict(type='LoadOccupancyGT', occ_format=occ_format),
-    # Occ3D labels are in the ego frame: move points and cameras there, so
-    # the ego frame is the working frame of everything after this step.
-    dict(type='PointsToEgoFrame'),
-]
+_labels = _base_.occ3d.labels
 _crop_and_pack = [
     dict(type='PointsRangeFilter', point_cloud_range=point_cloud_range),
     dict(type='PackOccInputs'),
@@ -61,12 +49,8 @@ val_dataloader = dict(dataset=dict(_dataset, pipeline=test_pipeline))
 test_dataloader = val_dataloader
 
 val_evaluator = dict(
-    convention=occ_format,
+    _base_.occ3d.metric,
     class_names=class_names,
-    # Occ3D's protocol: only voxels seen by a camera count.
-    use_camera_mask=True,
-    # SDG-OCC Fig. 7 reports IoU by distance from the ego.
-    distance_ranges=[(0, 20), (20, 30), (30, 40)],
     voxel_size=voxel_size,
     point_cloud_range=point_cloud_range)
 test_evaluator = val_evaluator
