@@ -19,6 +19,13 @@ class SparseTensor:
     and :meth:`replace_feature` shares it, so a rulebook built at one scale
     is reused by every later layer that names the same key (as spconv does).
 
+    :attr:`rulebook_memo` holds the torch backend's rulebooks of one forward
+    pass by layer and input sites. Every tensor derived from this one shares
+    it by reference, so a segment recomputed in the backward (activation
+    checkpointing) finds the rulebooks its first run built instead of
+    building them again; give a forward's first tensor a memo made outside
+    its checkpointed segments.
+
     Args:
         features (Tensor): Per-voxel features. Shape (N, C).
         coords (Tensor): Integer voxel coordinates ``(batch, z, y, x)``;
@@ -30,6 +37,8 @@ class SparseTensor:
             an empty dict.
         check (bool): Whether to verify that the coordinates lie inside the
             grid. Costs one min/max pass. Defaults to True.
+        rulebook_memo (dict, optional): The forward's rulebooks, shared by
+            reference. Defaults to None, an empty dict.
     """
 
     def __init__(self,
@@ -39,7 +48,8 @@ class SparseTensor:
                  batch_size: int,
                  indice_dict: Optional[Dict[Tuple[str, Hashable],
                                             object]] = None,
-                 check: bool = True) -> None:
+                 check: bool = True,
+                 rulebook_memo: Optional[dict] = None) -> None:
         if not isinstance(features, Tensor) or features.dim() != 2:
             raise ValueError('SparseTensor expects features of shape (N, C), '
                              f'got {_describe(features)}')
@@ -65,6 +75,7 @@ class SparseTensor:
         self.spatial_shape = spatial_shape
         self.batch_size = int(batch_size)
         self.indice_dict = {} if indice_dict is None else indice_dict
+        self.rulebook_memo = {} if rulebook_memo is None else rulebook_memo
         if check and coords.shape[0] > 0:
             self._check_bounds()
 
@@ -104,7 +115,8 @@ class SparseTensor:
             features (Tensor): New features. Shape (N, C').
 
         Returns:
-            SparseTensor: Same coords, shape, batch size and rulebook cache.
+            SparseTensor: Same coords, shape, batch size, rulebook cache and
+            memo.
         """
         if features.dim() != 2 or features.shape[0] != self.num_voxels:
             raise ValueError(
@@ -116,7 +128,8 @@ class SparseTensor:
             self.spatial_shape,
             self.batch_size,
             indice_dict=self.indice_dict,
-            check=False)
+            check=False,
+            rulebook_memo=self.rulebook_memo)
 
     def __repr__(self) -> str:
         return (f'{self.__class__.__name__}(num_voxels={self.num_voxels}, '

@@ -103,4 +103,5 @@ def spconv_sparse_conv(layer: SparseConvLayer,
         sp_output.spatial_shape,
         x.batch_size,
         indice_dict=indice_dict,
-        check=False)
+        check=False,
+        rulebook_memo=x.rulebook_memo)

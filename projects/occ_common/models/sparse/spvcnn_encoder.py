@@ -340,8 +340,11 @@ class SPVCNNEncoder(BaseModule):
         # per-point features between segments are kept.
         segment = self._group_points(points)
         batch, position, coords, rows = segment[:4]
+        # Made outside the segments: their recomputation reuses the
+        # rulebooks of the first run (SparseTensor.rulebook_memo).
+        rulebook_memo = {}
         x, point_feats = checkpoint_if_grad(self.with_cp, self._stem, *segment,
-                                            module=self)
+                                            rulebook_memo, module=self)
         stride = 1
         for index, stage_stride in enumerate(self.stage_strides):
             stride *= stage_stride
@@ -385,8 +388,11 @@ class SPVCNNEncoder(BaseModule):
 
     def _stem(self, batch: Tensor, position: Tensor, coords: Tensor,
               rows: Tensor, features: Tensor, fine: Tensor,
-              batch_size: int) -> Tuple[SparseTensor, Tensor]:
+              batch_size: int,
+              rulebook_memo: dict) -> Tuple[SparseTensor, Tensor]:
         """Voxel features and the stem (steps 1 and 2 of the class doc).
+
+        ``rulebook_memo`` is the forward's (:class:`SparseTensor`).
 
         Returns:
             tuple: The stem's sparse tensor and the point branch's start,
@@ -402,7 +408,8 @@ class SPVCNNEncoder(BaseModule):
             coords,
             self.sparse_shape,
             batch_size,
-            check=False)
+            check=False,
+            rulebook_memo=rulebook_memo)
         x = self.stem(x)
         return x, devoxelize(x.features, trilinear_plan(x, batch, position))
 

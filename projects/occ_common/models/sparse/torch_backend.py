@@ -11,7 +11,7 @@ and match its arithmetic, including spconv's 1x1 quirk (see
 :func:`dense_1x1`), so a state dict trained with either backend gives the
 same outputs in the other.
 """
-from typing import Optional
+from typing import Callable, Optional
 
 import torch
 from torch import Tensor
@@ -182,6 +182,28 @@ def _inverse_rulebook(layer: SparseConvLayer, x: SparseTensor) -> Rulebook:
     return rulebook.inverted()
 
 
+def _memoised(layer: SparseConvLayer, x: SparseTensor,
+              build: Callable[[], Rulebook]) -> Rulebook:
+    """``build()`` once per layer and input sites of a forward pass.
+
+    While a graph is being built the rulebook is kept in ``x``'s
+    :attr:`~SparseTensor.rulebook_memo`, keyed by the layer and the
+    identity of the input's coordinate tensor (kept with it, so the key
+    cannot be reused by another tensor); a checkpointed segment recomputed
+    in the backward gets the same input tensor and finds it. Under
+    ``no_grad`` nothing is recomputed, and nothing is kept.
+    """
+    if not torch.is_grad_enabled():
+        return build()
+    key = (id(layer), id(x.coords))
+    entry = x.rulebook_memo.get(key)
+    if entry is not None and entry[0] is x.coords:
+        return entry[1]
+    rulebook = build()
+    x.rulebook_memo[key] = (x.coords, rulebook)
+    return rulebook
+
+
 def torch_sparse_conv(layer: SparseConvLayer,
                       x: SparseTensor) -> SparseTensor:
     """Run one sparse convolution layer with the torch backend.
@@ -207,16 +229,19 @@ def torch_sparse_conv(layer: SparseConvLayer,
         if cached is not None:
             rulebook = _reused_subm(layer, x, cached)
         else:
-            rulebook = submanifold_rulebook(x.coords, x.spatial_shape,
-                                            layer.kernel_size, layer.dilation)
+            rulebook = _memoised(
+                layer, x, lambda: submanifold_rulebook(
+                    x.coords, x.spatial_shape, layer.kernel_size,
+                    layer.dilation))
     else:
         if layer.indice_key is not None and cache_key in indice_dict:
             raise ValueError(
                 f'strided conv indice_key {layer.indice_key!r} is already '
                 'used in this sparse tensor; give each strided conv its own')
-        rulebook = strided_rulebook(x.coords, x.spatial_shape,
-                                    layer.kernel_size, layer.stride,
-                                    layer.padding, layer.dilation)
+        rulebook = _memoised(
+            layer, x, lambda: strided_rulebook(
+                x.coords, x.spatial_shape, layer.kernel_size, layer.stride,
+                layer.padding, layer.dilation))
     if layer.indice_key is not None and not layer.inverse:
         indice_dict[cache_key] = rulebook
     features = rulebook_conv(x.features, layer.weight, layer.bias, rulebook)
@@ -226,4 +251,5 @@ def torch_sparse_conv(layer: SparseConvLayer,
         rulebook.out_shape,
         x.batch_size,
         indice_dict=indice_dict,
-        check=False)
+        check=False,
+        rulebook_memo=x.rulebook_memo)
