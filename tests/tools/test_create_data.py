@@ -49,13 +49,18 @@ def test_version_v1_0_is_trainval_and_test(world_copy):
 
 def test_workers_give_the_same_infos_and_show_progress(world_copy, capsys):
     """--workers 2 writes exactly the infos of --workers 0 (same order,
-    same content); both print the split's sample count and a progress bar
-    that reaches 2/2."""
+    same content); both print the split's sample count (also of the rainy
+    and night subsets) and a progress bar that reaches 2/2."""
     run_create_data('--root-path', world_copy, '--version', 'v1.0-mini',
                     '--overwrite', '--workers', '0')
     alone = _infos(world_copy)
     out = capsys.readouterr().out
     assert 'v1.0-mini train: 2 samples of 1 scenes' in out
+    for split, word in (('val_rainy', 'rain'), ('val_night', 'night')):
+        entries = _infos(world_copy, split)['data_list']
+        scenes = len({e['scene_token'] for e in entries})
+        assert (f'v1.0-mini {split}: {len(entries)} samples of {scenes} '
+                f'scenes (description mentions {word})') in out
     assert '2/2' in out
     run_create_data('--root-path', world_copy, '--version', 'v1.0-mini',
                     '--overwrite', '--workers', '2')

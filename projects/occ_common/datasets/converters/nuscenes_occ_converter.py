@@ -447,6 +447,14 @@ def create_nuscenes_occ_infos(root_path: str,
     if 'val' in data:
         data['val_rainy'] = [e for e in data['val'] if e['is_rainy']]
         data['val_night'] = [e for e in data['val'] if e['is_night']]
+        # The subsets are chosen by the scene description's words, not by
+        # a published list (OCCFusion's are not public as text): their
+        # sizes are printed so that a table can state them.
+        for split in ('val_rainy', 'val_night'):
+            scene_count = len({e['scene_token'] for e in data[split]})
+            print(f'{version} {split}: {len(data[split])} samples of '
+                  f'{scene_count} scenes (description mentions '
+                  f'{split[4:].replace("rainy", "rain")})')
     os.makedirs(out_dir, exist_ok=True)
     for split, entries in data.items():
         write_info_file(targets[split], entries, version, split, synthetic)
