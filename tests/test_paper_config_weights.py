@@ -18,6 +18,8 @@ from mmengine.logging import MMLogger
 from mmengine.registry import init_default_scope
 
 from projects.occ_common.models.pretrained import PretrainedMismatchError
+from projects.occ_common.testing.imagenet_swin import (constant_like,
+                                                       official_swin_state)
 
 ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
 OCC_CYL = 'configs/occ_cyl/occcyl_r50-swins_3xb1-24e_surroundocc-nus.py'
@@ -66,13 +68,35 @@ def _r50_state():
     return state
 
 
+#: The official ImageNet Swins the OccCylindrical configs start from: file
+#: name -> (depths, heads); 96 wide, window 7, 4 x 4 RGB patches.
+IMAGENET_SWINS = {
+    'swin_small_patch4_window7_224.pth': ((2, 2, 18, 2), (3, 6, 12, 24)),
+    'swin_tiny_patch4_window7_224.pth': ((2, 2, 6, 2), (3, 6, 12, 24)),
+}
+
+
+def _write_imagenet_swin(path, depths, heads):
+    """The official file's keys and shapes, each a constant (stride-0
+    tensors: a few kB for Swin-S's 49.6 M values)."""
+    init_default_scope('mmdet3d')
+    swin = MODELS.build(
+        dict(type='mmdet.SwinTransformer', embed_dims=96, depths=depths,
+             num_heads=heads, window_size=7, init_cfg=None))
+    state = official_swin_state(swin, value=constant_like(0.02))
+    torch.save(dict(model=state), path)
+
+
 @pytest.fixture(scope='module')
 def hub(tmp_path_factory):
-    """torch's hub cache holding torchvision://resnet50's file."""
+    """torch's hub cache holding torchvision://resnet50's file and the
+    ImageNet Swin-S and Swin-T files."""
     root = tmp_path_factory.mktemp('hub')
     (root / 'checkpoints').mkdir()
     state = _r50_state()
     torch.save(state, root / 'checkpoints' / 'resnet50-0676ba61.pth')
+    for name, (depths, heads) in IMAGENET_SWINS.items():
+        _write_imagenet_swin(root / 'checkpoints' / name, depths, heads)
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(torch.hub, 'get_dir', lambda: str(root))
         yield root, state
@@ -111,6 +135,31 @@ def test_paper_config_init_weights_loads_imagenet_r50(path, hub):
         assert frozen == []
 
 
+@pytest.mark.parametrize('path', [
+    OCC_CYL,
+    'configs/occ_cyl/occcyl-lite_r50-swint_3xb1-24e_surroundocc-nus.py'
+], ids=['swin-s', 'swin-t'])
+def test_occcyl_configs_load_imagenet_swin_and_keep_dcn_offsets(path, hub):
+    """Issue 47: the TPV encoder starts from the official ImageNet Swin-S
+    (Swin-T for the lite model): every block loads (the file's 0.02), the
+    2 x 2, 128-channel patch embedding keeps its initialisation. The DCNv2
+    offset convs of ResNet stages 3-4, absent from torchvision's file, stay
+    at mmcv's zeros while conv2's own weight loads."""
+    model = _build(path)
+    model.init_weights()
+    swin = model.tpv_encoder.backbone
+    deepest = swin.stages[2].blocks[-1]
+    assert bool((deepest.attn.w_msa.qkv.weight == 0.02).all())
+    assert bool((swin.stages[0].blocks[0].ffn.layers[1].weight == 0.02).all())
+    assert not bool((swin.patch_embed.projection.weight == 0.02).all())
+    _, state = hub
+    block = model.img_encoder.backbone.layer3[0]
+    assert type(block.conv2).__name__ == 'ModulatedDeformConv2dPack'
+    assert torch.equal(block.conv2.weight, state['layer3.0.conv2.weight'])
+    assert not block.conv2.conv_offset.weight.any()
+    assert not block.conv2.conv_offset.bias.any()
+
+
 def test_without_checkpoint_the_backbone_trains_normally():
     """checkpoint=None with frozen_stages=-1 and live BN: init_weights
     passes, every backbone parameter trains and model.train() puts every
@@ -144,22 +193,24 @@ def test_without_checkpoint_frozen_random_layers_are_refused():
 
 def test_fcos3d_r101_dcn_checkpoint_is_refused_by_name(tmp_path, hub):
     """FCOS3D's public weights (caffe-style ResNet-101 with DCN in stages 3
-    and 4, in a detector checkpoint) into the ResNet-50: 17 more layer3
-    blocks (15 tensors each, the BN counters aside) and the DCN offset convs
-    of 23 + 3 blocks (weight and bias) give 17 * 15 + 26 * 2 = 307
-    unexpected keys (358 with the counters, as mmengine reports). The load
-    is refused naming the file, the part and layer3.6's keys; nothing is
-    loaded (conv1 is not the file's 0.01)."""
+    and 4, in a detector checkpoint) into the ResNet-50, which has DCN in
+    the same stages (issue 47): the 17 layer3 blocks it lacks bring 15
+    tensors each (the BN counters aside) and their DCN offset convs 2
+    more, 17 * (15 + 2) = 289 unexpected keys (307 into the ResNet-50
+    without DCN of before, 358 with the counters as mmengine reports). The
+    load is refused naming the file, the part and layer3.6's keys; nothing
+    is loaded (conv1 is not the file's 0.01)."""
     _, state = hub
     r101 = {k: v for k, v in state.items() if not k.startswith('fc.')}
     block = {k[len('layer3.5.'):]: v for k, v in state.items()
              if k.startswith('layer3.5.')}
     for i in range(6, 23):
         r101.update({f'layer3.{i}.{k}': v for k, v in block.items()})
-    for stage, blocks in (('layer3', 23), ('layer4', 3)):
+    for stage, blocks, width in (('layer3', 23, 256), ('layer4', 3, 512)):
         for i in range(blocks):
-            r101[f'{stage}.{i}.conv2.conv_offset.weight'] = torch.zeros(1)
-            r101[f'{stage}.{i}.conv2.conv_offset.bias'] = torch.zeros(1)
+            r101[f'{stage}.{i}.conv2.conv_offset.weight'] = torch.zeros(
+                27, width, 3, 3)
+            r101[f'{stage}.{i}.conv2.conv_offset.bias'] = torch.zeros(27)
     path = tmp_path / 'fcos3d_r101_dcn.pth'
     torch.save(dict(state_dict={f'backbone.{k}': v
                                 for k, v in r101.items()}), path)
@@ -172,7 +223,7 @@ def test_fcos3d_r101_dcn_checkpoint_is_refused_by_name(tmp_path, hub):
         model.init_weights()
     message = str(err.value)
     assert f'checkpoint {path} does not fit img_encoder.backbone' in message
-    assert '307 unexpected, 0 missing and 0 mis-shaped keys' in message
+    assert '289 unexpected, 0 missing and 0 mis-shaped keys' in message
     assert "'layer3.6.conv1.weight'" in message
     conv1 = model.img_encoder.backbone.conv1.weight
     assert not torch.equal(conv1, torch.full_like(conv1, 0.01))

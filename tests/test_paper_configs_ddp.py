@@ -50,6 +50,7 @@ def narrow_options(cfg: Config) -> Dict:
             'model.depth_bound': [1.0, 51.0, 5.0],
             'model.cylinder.shape': [32, 64, 16],
             'model.pretrained.img_backbone.checkpoint': None,
+            'model.pretrained.tpv_backbone.checkpoint': None,
             'model.img_encoder.backbone.base_channels': 8,
             'model.img_encoder.neck.in_channels': _resnet_widths(
                 model.img_encoder.backbone, 8),

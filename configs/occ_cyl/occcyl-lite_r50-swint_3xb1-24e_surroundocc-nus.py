@@ -17,4 +17,9 @@ model = dict(
     tpv_encoder=dict(
         backbone=dict(
             depths=[2, 2, 6, 2],
-            drop_path_rate=0.2)))  # Swin-T's (Swin paper, mmdet configs)
+            drop_path_rate=0.2)),  # Swin-T's (Swin paper, mmdet configs)
+    # ImageNet Swin-T weights for the Swin-T (as PointOcc).
+    pretrained=dict(
+        tpv_backbone=dict(
+            checkpoint=('https://github.com/SwinTransformer/storage/releases/'
+                        'download/v1.0.0/swin_tiny_patch4_window7_224.pth'))))

@@ -23,9 +23,13 @@ sweeps_num = 9
 _paper_inputs = dict(
     MultiViewImageAug=dict(final_size=img_size),
     LoadOccPointsFromMultiSweeps=dict(sweeps_num=sweeps_num))
+# The lineage's photometric-only augmentation (the model base says why).
+_train_aug = _base_.lineage_train_aug
 train_pipeline = [
-    dict(t, **_paper_inputs.get(t['type'], {}))
-    for t in _base_.train_pipeline
+    step for t in _base_.train_pipeline for step in
+    [dict(t, **_paper_inputs.get(t['type'], {}),
+          **_train_aug.get(t['type'], {}))] +
+    ([_base_.lineage_photometric] if t['type'] == 'MultiViewImageAug' else [])
 ]
 test_pipeline = [
     dict(t, **_paper_inputs.get(t['type'], {}))

@@ -31,13 +31,18 @@ model = dict(
     # coarsest Swin stride 16), M = 4.
     cylinder=dict(shape=[32, 64, 16]),
     # No download: trained from scratch, so nothing frozen.
-    pretrained=dict(img_backbone=dict(checkpoint=None)),
+    pretrained=dict(
+        img_backbone=dict(checkpoint=None),
+        tpv_backbone=dict(checkpoint=None)),
     img_encoder=dict(
         backbone=dict(
             depth=18,
             base_channels=8,
             frozen_stages=-1,
             norm_eval=False,
+            # ResNet-18's basic blocks take no deformable conv.
+            dcn=None,
+            stage_with_dcn=(False, False, False, False),
             # A tiny model needs no memory saving (nor do the modules
             # below): recomputation would only cost time.
             with_cp=False),
@@ -97,7 +102,12 @@ train_cfg = dict(max_epochs=max_epochs, val_interval=max_epochs)
 # from a third): without it the first steps (gradient norms 130-245, above
 # the clip of 35) overshoot, the loss rises for two iterations and after
 # 8 the model predicts every voxel empty.
-optim_wrapper = dict(optimizer=dict(lr=2e-3))
+# From scratch, the image backbone learns at the full rate (the base's
+# lr_mult 0.1 is for pretrained weights).
+optim_wrapper = dict(
+    optimizer=dict(lr=2e-3),
+    paramwise_cfg=dict(
+        custom_keys={'img_encoder.backbone': dict(lr_mult=1.0)}))
 param_scheduler = [
     dict(type='LinearLR', start_factor=0.1, by_epoch=False, begin=0,
          end=50)

@@ -11,6 +11,7 @@ import pytest
 import torch
 from mmdet3d.registry import MODELS
 from mmengine.config import Config
+from mmengine.optim import build_optim_wrapper
 from mmengine.registry import init_default_scope
 
 from projects.occ_common.testing.config_delta import (coupled_value_mismatches,
@@ -43,8 +44,10 @@ DELTAS = {
     OCC3D: (MODEL_BASE, COUPLED | {'loss_mask_key'}),
     # RayIoU (issue 49): the Occ3D config trained on whole grids.
     NOMASK: (OCC3D, {'loss_mask_key'}),
-    # The lighter model: the slimmer widths, nothing else.
+    # The lighter model: the slimmer widths and Swin-T's ImageNet weights,
+    # nothing else.
     LITE: (PAPER, {
+        'pretrained.tpv_backbone.checkpoint',
         'img_encoder.backbone.out_indices', 'img_encoder.neck.in_channels',
         'img_encoder.neck.num_outs', 'img_encoder.num_levels',
         'img_encoder.out_channels', 'depth_net.in_channels',
@@ -80,6 +83,8 @@ DELTAS = {
         'depth_net.seg_channels', 'loss_seg.type', 'loss_seg.ignore_index',
         'loss_seg.avg_non_ignore', 'loss_seg.loss_weight'
     }),
+    # The dataset base's geometric augmentation: the pipeline only.
+    'occcyl-geoaug': (PAPER, set()),
     # Table V (3), VI (2) and VII (3): one knob each.
     'occcyl-nodepthsup': (PAPER, {'loss_depth'}),
     'occcyl-nodepthfeat': (PAPER, {'depth_net.with_depth_feature'}),
@@ -100,8 +105,8 @@ def test_config_inventory():
     """The paper's config, its Occ3D variant (also without the camera
     mask, for RayIoU), the lighter model, the tiny
     and small synthetic configs (the small one also with a 2-D semantic
-    target, and on Occ3D without the mask) and the deltas of Tables V (3
-    files), VI (2) and VII (3)."""
+    target, and on Occ3D without the mask), the deltas of Tables V (3
+    files), VI (2) and VII (3) and the geometric-augmentation option."""
     assert set(MAIN) == {
         PAPER, OCC3D, NOMASK, LITE, TINY, SMALL, SMALL_OCC3D, SEG2D
     }
@@ -155,6 +160,68 @@ def test_small_occ3d_config_has_occ3d_data_and_metric():
     assert ray_metric.type == 'OccRayIoUMetric'
 
 
+def _augmentations(path):
+    """The augmentation steps of a config's training pipeline, in order."""
+    return [
+        dict(t) for t in Config.fromfile(path).train_pipeline
+        if t['type'] in ('MultiViewImageAug', 'MultiViewPhotoMetric',
+                         'OccBEVAug')
+    ]
+
+
+def test_paper_configs_train_with_the_lineage_recipe():
+    """Issue 47: SurroundOcc's and OCCFusion's photometric distortion right
+    after the images, no geometric change (the training images get the
+    test pipeline's geometry: scale 1, crop at the midpoints 0.5 / 1.0, no
+    rotation or flip; no BEV flip); the image backbone at a tenth of the
+    rate, DCNv2 in ResNet stages 3 and 4, ImageNet Swin-S weights. The
+    geoaug option restores the dataset base's ranges and drops the
+    distortion. The tiny config, trained from scratch, keeps the full rate
+    and no DCN (ResNet-18)."""
+    for path in (PAPER, OCC3D, NOMASK):
+        image, photometric, bev = _augmentations(path)
+        assert image == dict(
+            type='MultiViewImageAug', final_size=(900, 1600),
+            resize_range=(1.0, 1.0), crop_x_range=(0.5, 0.5),
+            crop_y_range=(1.0, 1.0), flip_prob=0.0, rot_range=(0.0, 0.0))
+        assert photometric == dict(type='MultiViewPhotoMetric')
+        assert bev == dict(type='OccBEVAug', flip_x_prob=0.0,
+                           flip_y_prob=0.0)
+        cfg = Config.fromfile(path)
+        assert cfg.optim_wrapper.paramwise_cfg.custom_keys == {
+            'img_encoder.backbone': dict(lr_mult=0.1)}
+        backbone = cfg.model.img_encoder.backbone
+        assert backbone.dcn.type == 'DCNv2'
+        assert backbone.stage_with_dcn == (False, False, True, True)
+        assert cfg.model.pretrained.tpv_backbone.checkpoint.endswith(
+            'swin_small_patch4_window7_224.pth')
+    geo = osp.join(CONFIG_DIR, 'ablations',
+                   'occcyl-geoaug_r50-swins_3xb1-24e_surroundocc-nus.py')
+    image, bev = _augmentations(geo)
+    assert (image['resize_range'], image['flip_prob'],
+            image['rot_range']) == ((0.94, 1.06), 0.5, (-5.4, 5.4))
+    assert (bev['flip_x_prob'], bev['flip_y_prob']) == (0.5, 0.5)
+    tiny = Config.fromfile(TINY)
+    assert tiny.optim_wrapper.paramwise_cfg.custom_keys == {
+        'img_encoder.backbone': dict(lr_mult=1.0)}
+    assert tiny.model.img_encoder.backbone.dcn is None
+
+
+def test_image_backbone_learns_at_a_tenth_of_the_rate():
+    """The optimiser mmengine builds for the paper config gives the image
+    backbone's parameters 5e-5 x 0.1 = 5e-6 and everything else 5e-5."""
+    cfg = Config.fromfile(PAPER)
+    init_default_scope(cfg.default_scope)
+    model = MODELS.build(cfg.model)
+    optimizer = build_optim_wrapper(model, cfg.optim_wrapper).optimizer
+    rate = {id(p): group['lr'] for group in optimizer.param_groups
+            for p in group['params']}
+    backbone = {id(p) for p in model.img_encoder.backbone.parameters()}
+    trained = [p for p in model.parameters() if p.requires_grad]
+    assert {rate[id(p)] for p in trained if id(p) in backbone} == {5e-6}
+    assert {rate[id(p)] for p in trained if id(p) not in backbone} == {5e-5}
+
+
 def test_ablation_knobs():
     """Table VI: (1, 51, d) gives 25 bins at d = 2 and 5 at d = 10; Table
     VII: M = 1, 2, 4."""
@@ -182,15 +249,20 @@ def test_paper_silent_choices_of_issue_14():
 def test_paper_model_parameter_count(capsys):
     """Issue 11, item 5. Table IV: 111.62 M parameters. The paper config
     lands within 3 %: ResNet-50 23,508,032 (torchvision's 25,557,032 minus
-    the 2048 x 1000 + 1000 fc), Swin-S 48.88 M (its 49.6 M ImageNet model
-    without the 0.77 M classifier, with a 128-channel 2 x 2 patch
-    embedding), BEVDepth's 512-wide DepthNet 28.4 M. The count by module is
-    printed for the report."""
+    the 2048 x 1000 + 1000 fc) plus the DCNv2 offset convs of stages 3 and
+    4 (one 3 x 3 conv to 27 channels with bias in each block: 6 x (256 x 9
+    x 27 + 27) + 3 x (512 x 9 x 27 + 27) = 373,410 + 373,329 = 746,739),
+    Swin-S 48.88 M (its 49.6 M ImageNet model without the 0.77 M
+    classifier, with a 128-channel 2 x 2 patch embedding), BEVDepth's
+    512-wide DepthNet 28.4 M. The count by module is printed for the
+    report."""
     cfg = Config.fromfile(PAPER)
     init_default_scope(cfg.default_scope)
     model = MODELS.build(cfg.model)
     backbone = sum(p.numel() for p in model.img_encoder.backbone.parameters())
-    assert backbone == 25_557_032 - (2048 * 1000 + 1000)
+    dcn_offsets = 6 * (256 * 9 * 27 + 27) + 3 * (512 * 9 * 27 + 27)
+    assert dcn_offsets == 746_739
+    assert backbone == 25_557_032 - (2048 * 1000 + 1000) + dcn_offsets
     parts = {
         name: sum(p.numel() for p in child.parameters())
         for name, child in model.named_children()

@@ -49,6 +49,7 @@ def export_graph(module: nn.Module,
     Returns:
         str: ``path``.
     """
+    refuse_deformable_convs(module)
     # The exporter restores the module's mode afterwards: a wrapper left in
     # training mode would put the whole model back into it.
     module.eval()
@@ -74,6 +75,33 @@ def export_graph(module: nn.Module,
             dynamo=False)
     constants_to_initializers(path)
     return path
+
+
+def refuse_deformable_convs(module: nn.Module) -> None:
+    """Raise, naming them, if ``module`` holds mmcv's deformable convs.
+
+    ONNX's standard operators do not cover mmcv's (modulated) deformable
+    convolution: mmcv writes its own custom operator, which onnxruntime
+    does not run without mmcv's operator library, and the legacy exporter
+    fails on it with an unrelated AttributeError. OccCylindrical's paper
+    configs have DCNv2 in ResNet stages 3-4.
+
+    Raises:
+        ValueError: Naming the first such layers and what to do.
+    """
+    from mmcv.ops import DeformConv2d, ModulatedDeformConv2d
+    names = [
+        name for name, child in module.named_modules()
+        if isinstance(child, (DeformConv2d, ModulatedDeformConv2d))
+    ]
+    if names:
+        raise ValueError(
+            f'{len(names)} deformable convolutions (mmcv DCN), e.g. '
+            f'{names[:3]}: ONNX export covers models without them (mmcv '
+            'exports DCN as its own custom operator, which onnxruntime '
+            'cannot run). Export a config whose image backbone has '
+            'dcn=None and stage_with_dcn all False, with weights trained '
+            'that way.')
 
 
 def _hypot(g, x, y):

@@ -12,6 +12,7 @@ from projects.occ_common.models.pretrained import (PretrainedMismatchError,
                                                    check_entries,
                                                    load_pretrained,
                                                    resolve_checkpoint)
+from projects.occ_common.testing.imagenet_swin import official_swin_state
 from projects.occ_common.utils import UnsafeCheckpointError
 
 register_all_modules(init_default_scope=False)
@@ -179,25 +180,12 @@ SWIN_ENTRY = dict(
 
 
 def _official_swin_file(path):
-    """An ImageNet Swin (RGB, 4 x 4 patches) in the official layout:
-    layers.* / attn.* / mlp.fc1 / patch_embed.proj keys, a final 'norm',
-    a classifier 'head' and the shifted blocks' attn_mask buffers."""
-    imagenet = _swin(3, 4)
-    renames = [('stages.', 'layers.'), ('attn.w_msa.', 'attn.'),
-               ('ffn.layers.0.0.', 'mlp.fc1.'), ('ffn.layers.1.', 'mlp.fc2.'),
-               ('patch_embed.projection', 'patch_embed.proj')]
-    state = {}
-    for key, value in imagenet.state_dict().items():
-        if key.startswith('norm'):
-            continue  # mmdet's per-level output norms
-        for old, new in renames:
-            key = key.replace(old, new)
-        state[key] = value + 0.5 if value.is_floating_point() else value
-    state['norm.weight'] = torch.ones(16)
-    state['norm.bias'] = torch.zeros(16)
-    state['head.weight'] = torch.zeros(10, 16)
-    state['head.bias'] = torch.zeros(10)
-    state['layers.0.blocks.1.attn_mask'] = torch.zeros(4, 4, 4)
+    """An ImageNet Swin (RGB, 4 x 4 patches) in the official layout, its
+    values offset by 0.5 from the module's (so a load is visible), with a
+    10-class head."""
+    state = official_swin_state(
+        _swin(3, 4), num_classes=10,
+        value=lambda key, v: v + 0.5 if v.is_floating_point() else v)
     torch.save(dict(model=state), path)
     return state
 
