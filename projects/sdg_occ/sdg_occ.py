@@ -118,6 +118,10 @@ class SDGOcc(BaseOccDetector):
         test_cache (bool): With T > 1, reuse at test time each frame's
             camera BEV for the next frame (a sequential loader then runs
             about one frame's image backbone per sample). Defaults to True.
+        predict_branch (str): ``'kl'`` only. ``'student'`` (the default)
+            predicts from the camera BEV, the paper's inference; ``'teacher'``
+            from the fused BEV through the teacher's BEV encoder and head
+            (LiDAR needed), to score the teacher with ``tools/test.py``.
         **kwargs: ``empty_index``, ``ignore_index``, ``loss_mask_key``,
             ``data_preprocessor`` and ``init_cfg`` of
             :class:`BaseOccDetector`.
@@ -147,6 +151,7 @@ class SDGOcc(BaseOccDetector):
                  downsample: int = 16,
                  num_frames: int = 1,
                  test_cache: bool = True,
+                 predict_branch: str = 'student',
                  **kwargs):
         super().__init__(
             point_cloud_range,
@@ -204,6 +209,13 @@ class SDGOcc(BaseOccDetector):
                 raise ValueError(f'SDGOcc: {name} is for '
                                  f"variant='kl' only, got {variant!r}")
         self.detach_teacher_camera = bool(detach_teacher_camera)
+        if predict_branch not in ('student', 'teacher'):
+            raise ValueError("SDGOcc predict_branch must be 'student' or "
+                             f"'teacher', got {predict_branch!r}")
+        if predict_branch == 'teacher' and variant != 'kl':
+            raise ValueError("SDGOcc: predict_branch='teacher' is for "
+                             f"variant='kl' only, got {variant!r}")
+        self.predict_branch = predict_branch
         self.teacher_bev_encoder = self.teacher_occ_head = None
         if separate_teacher_head:
             self.teacher_bev_encoder = MODELS.build(bev_encoder)
@@ -503,10 +515,7 @@ class SDGOcc(BaseOccDetector):
             losses.update(self.occ_head.loss(self.bev_encoder(fused), gt_occ))
             return losses
         losses.update(self.occ_head.loss(self.bev_encoder(cam['bev']), gt_occ))
-        teacher_encoder, teacher_head = self.bev_encoder, self.occ_head
-        if self.teacher_occ_head is not None:
-            teacher_encoder = self.teacher_bev_encoder
-            teacher_head = self.teacher_occ_head
+        teacher_encoder, teacher_head = self._teacher_decoder()
         teacher = teacher_head.loss(
             teacher_encoder(fused), gt_occ, suffix='_teacher')
         losses.update({
@@ -534,14 +543,32 @@ class SDGOcc(BaseOccDetector):
             list[Det3DDataSample]: The input samples with ``pred_occ`` (X, Y,
             Z) long added; their ground truth stays for the metric.
         """
+        if self.predict_branch == 'teacher':
+            _, cam = self.extract_camera_bev(inputs, data_samples)
+            encoder, head = self._teacher_decoder()
+            fused = self.fuse(self.extract_lidar_bev(inputs), cam)
+            return self.add_pred_occ(data_samples,
+                                     head.predict(encoder(fused)))
         return self.add_pred_occ(
             data_samples,
             self.occ_head.predict(
                 self.bev_encoder(self.extract_feat(inputs, data_samples))))
 
+    def _teacher_decoder(self) -> tuple:
+        """SDG-KL teacher's BEV encoder and head (the student's unless
+        ``separate_teacher_head``)."""
+        if self.teacher_occ_head is not None:
+            return self.teacher_bev_encoder, self.teacher_occ_head
+        return self.bev_encoder, self.occ_head
+
     def _forward(self, inputs: dict, data_samples: Sequence) -> Tensor:
         """Occupancy logits (B, num_classes, X, Y, Z) of the inference path.
         """
+        if self.predict_branch == 'teacher':
+            raise ValueError("SDGOcc: predict_branch='teacher' scores the "
+                             'teacher through predict (tools/test.py); the '
+                             'inference path (tensor mode, export) is the '
+                             "student's")
         return height_logits_to_xyz(
             self.occ_head(
                 self.bev_encoder(self.extract_feat(inputs, data_samples))))

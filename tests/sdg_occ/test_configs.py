@@ -41,6 +41,7 @@ def _main(variant, dataset):
 FUSION = _main('fusion', 'occ3d-nus')
 KL = _main('kl', 'occ3d-nus')
 FUSION_SOCC = _main('fusion', 'surroundocc-nus')
+FUSION_2F = _main('fusion-2f', 'occ3d-nus')
 #: What each config changes in the model of the config it builds on.
 COUPLED = {
     'point_cloud_range', 'voxel_size', 'num_classes', 'empty_index',
@@ -82,12 +83,17 @@ DELTAS = {
     _small('kl').replace('occ3d-nus', 'occ3d-nus-nomask'): (
         _small('kl'), {'loss_mask_key'}),
     # The temporal variants (T = 2): the frame count, nothing else.
-    _main('fusion-2f', 'occ3d-nus'): (FUSION, {'num_frames'}),
+    FUSION_2F: (FUSION, {'num_frames'}),
     _tiny('fusion-2f'): (TINY_FUSION, {'num_frames'}),
     # Table 3: Baseline, +SDG, +FOAD (SDG + FOAD is FUSION itself).
     'sdgocc-camera-lss': (FUSION, CAMERA_KEYS | NO_SDG_KEYS),
     'sdgocc-camera-sdg': (FUSION, CAMERA_KEYS),
     'sdgocc-fusion-lss': (FUSION, NO_SDG_KEYS),
+    # ... and its camera rows and SDG-KL over two frames: the same deltas
+    # on the two-frame SDG-Fusion.
+    'sdgocc-camera-lss-2f': (FUSION_2F, CAMERA_KEYS | NO_SDG_KEYS),
+    'sdgocc-camera-sdg-2f': (FUSION_2F, CAMERA_KEYS),
+    _main('kl-2f', 'occ3d-nus'): (FUSION_2F, KL_KEYS),
 }
 
 
@@ -97,18 +103,19 @@ def _name(path):
 
 def test_config_inventory():
     """Both variants on both datasets, as tiny and small synthetic configs,
-    and the deltas of Tables 3 (3 files; SDG + FOAD is the main fusion
-    config), 4 (6) and 5 (4)."""
+    and the deltas of Tables 3 (3 files, and the two camera rows over two
+    frames; SDG + FOAD is the main fusion config), 4 (6) and 5 (4)."""
     names = {osp.basename(p) for p in MAIN}
     for variant in ('fusion', 'kl'):
         for dataset in ('occ3d-nus', 'surroundocc-nus'):
             assert osp.basename(_main(variant, dataset)) in names
         assert osp.basename(_tiny(variant)) in names
         assert osp.basename(_small(variant)) in names
-    assert len(ABLATIONS) == 13
+    assert len(ABLATIONS) == 15
     table3 = sorted(_name(p) for p in ABLATIONS if _name(p) in DELTAS)
     assert table3 == [
-        'sdgocc-camera-lss', 'sdgocc-camera-sdg', 'sdgocc-fusion-lss'
+        'sdgocc-camera-lss', 'sdgocc-camera-lss-2f', 'sdgocc-camera-sdg',
+        'sdgocc-camera-sdg-2f', 'sdgocc-fusion-lss'
     ]
 
 
@@ -165,7 +172,8 @@ def test_ablation_knobs():
         elif match := re.search(r'-k(\d)_', name):
             assert model.fusion.kernel_size == int(match[1])
         else:
-            assert model.view_transform.use_sdg is ('-lss_' not in name)
+            assert model.view_transform.use_sdg is ('-lss' not in name)
+            assert model.get('num_frames', 1) == (2 if '-2f_' in name else 1)
             camera = '-camera-' in name
             assert (model.variant == 'camera') is camera
             assert (model.lidar_encoder is None) is camera

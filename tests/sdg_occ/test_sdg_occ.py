@@ -11,6 +11,7 @@ from mmdet3d.registry import MODELS
 
 from projects.occ_common.testing.occ_inputs import make_occ_batch
 from projects.sdg_occ import SDGOcc  # noqa: F401 (registers the model)
+from projects.sdg_occ.c2h_head import height_logits_to_xyz
 
 PC_RANGE = (-8.0, -8.0, -2.0, 8.0, 8.0, 2.0)
 DEPTH_BOUND = (1.0, 9.0, 1.0)
@@ -241,6 +242,42 @@ def test_kl_inference_skips_lidar_encoder_and_fusion():
     with torch.no_grad():
         fusion(inputs, samples, mode='predict')
     assert len(enc_calls) == 1
+
+
+@pytest.mark.parametrize('separate', [False, True])
+def test_kl_predict_branch_teacher_scores_the_teacher(separate):
+    """predict_branch='teacher' predicts the argmax of the teacher's head
+    on the fused BEV (LiDAR queries, camera keys and values), computed here
+    step by step, whose logits differ from the student's; tensor mode
+    refuses it (the inference path is the student's). Other variants
+    refuse the switch, and an unknown branch is named."""
+    cfg = dict(_cfg('kl'), separate_teacher_head=separate)
+    torch.manual_seed(0)
+    student = MODELS.build(cfg).eval()
+    teacher = MODELS.build(dict(cfg, predict_branch='teacher')).eval()
+    teacher.load_state_dict(student.state_dict())
+    inputs, samples = _batch(num_points=(60, 60))
+    with torch.no_grad():
+        got = [s.pred_occ for s in teacher(inputs, samples, mode='predict')]
+        student_logits = student(inputs, samples, mode='tensor')
+        _, cam = teacher.extract_camera_bev(inputs, samples)
+        fused = teacher.fusion(
+            teacher.extract_lidar_bev(inputs)['bev'], cam['bev'])
+        encoder = teacher.teacher_bev_encoder if separate else \
+            teacher.bev_encoder
+        head = teacher.teacher_occ_head if separate else teacher.occ_head
+        want = head.predict(encoder(fused))
+        teacher_logits = head(encoder(fused))
+    for b in range(2):
+        assert torch.equal(got[b], want[b])
+    assert not torch.allclose(height_logits_to_xyz(teacher_logits),
+                              student_logits)
+    with pytest.raises(ValueError, match='inference path'):
+        teacher(inputs, samples, mode='tensor')
+    with pytest.raises(ValueError, match="variant='kl' only"):
+        MODELS.build(dict(_cfg('fusion'), predict_branch='teacher'))
+    with pytest.raises(ValueError, match="got 'fused'"):
+        MODELS.build(dict(cfg, predict_branch='fused'))
 
 
 def test_predict_matches_tensor_mode():

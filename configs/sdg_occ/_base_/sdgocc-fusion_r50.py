@@ -170,6 +170,18 @@ kl_model = dict(
     # benchmark). Keeping the teacher's loss out of the camera branch
     # instead (detach_teacher_camera) did not help.
     separate_teacher_head=True)
+# SDG-OCC Table 3's camera rows (ablations/sdgocc-camera-*, single and
+# two-frame): no LiDAR encoder, no fusion. "+SDG" keeps the SDG lift (the
+# LiDAR points still guide it); the Baseline is the plain LSS lift, and
+# without SDG nothing uses the 2D semantics, so its DepthNet has no
+# semantic head and no loss_seg (FlashOcc has none); its depth supervision
+# stays (FlashOcc's BEVDepth-style DepthNet has it).
+camera_sdg_model = dict(variant='camera', lidar_encoder=None, fusion=None)
+camera_lss_model = dict(
+    camera_sdg_model,
+    view_transform=dict(use_sdg=False),
+    depth_net=dict(seg_channels=0),
+    loss_seg=None)
 
 # Schedule: AdamW lr 1e-4 with gradient clipping (paper). The weight decay,
 # clip norm, warm-up and 24 epochs follow BEVDet-Occ / FlashOcc (not given

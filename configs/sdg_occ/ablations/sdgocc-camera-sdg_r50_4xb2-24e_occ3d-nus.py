@@ -3,4 +3,4 @@
 # view transform (their depth maps), so predict needs them.
 _base_ = ['../sdgocc-fusion_r50_4xb2-24e_occ3d-nus.py']
 
-model = dict(variant='camera', lidar_encoder=None, fusion=None)
+model = _base_.camera_sdg_model

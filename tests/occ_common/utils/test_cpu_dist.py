@@ -22,12 +22,13 @@ PAPER_CONFIGS = sorted(
 
 
 def test_paper_configs_are_found():
-    """Four OccCylindrical and seven SDG-OCC paper configs at the top level
-    of configs/occ_cyl/ and configs/sdg_occ/, three of them the Occ3D
-    configs trained without the camera mask (``*-nomask.py``)."""
+    """Four OccCylindrical and eight SDG-OCC paper configs (SDG-KL over two
+    frames the eighth) at the top level of configs/occ_cyl/ and
+    configs/sdg_occ/, three of them the Occ3D configs trained without the
+    camera mask (``*-nomask.py``)."""
     names = [osp.basename(p) for p in PAPER_CONFIGS]
     assert sum(n.startswith('occcyl') for n in names) == 4
-    assert sum(n.startswith('sdgocc') for n in names) == 7
+    assert sum(n.startswith('sdgocc') for n in names) == 8
     assert sum(n.endswith('-nomask.py') for n in names) == 3
 
 
