@@ -358,3 +358,26 @@ def test_suffix_does_not_swallow_the_next_option(capsys):
     with pytest.raises(SystemExit):
         _tool().parse_args(['--runs', 'occcyl-small', '--suffix', '--retest'])
     assert 'expected one argument' in capsys.readouterr().err
+
+
+def test_no_mask_configs_point_their_evaluators_and_name_their_labels():
+    """The small SDG-Fusion scored with RayIoU: data_options also points
+    its RayIoU metric (evaluator 1 of the list, which reads the info file
+    itself) at the world; the OccupancyMetric the table reads is
+    evaluator 0 there and the single evaluator of the masked config; the
+    labels say whether the loss saw every voxel."""
+    nomask, masked = (osp.join(
+        ROOT, 'configs', 'sdg_occ',
+        f'sdgocc-fusion_small_1xb1-20e_occ3d-nus{tag}-synthetic.py')
+        for tag in ('-nomask', ''))
+    options = tool_runs.data_options('/w', nomask)
+    assert options[3:] == ['val_evaluator.1.data_root=/w/',
+                           'test_evaluator.1.data_root=/w/']
+    assert len(tool_runs.data_options('/w', masked)) == 3
+    cfg_nomask, cfg_masked = Config.fromfile(nomask), Config.fromfile(masked)
+    assert tool_runs.occupancy_metric(cfg_nomask, 'test')[0] == \
+        'test_evaluator.0'
+    assert tool_runs.occupancy_metric(cfg_masked, 'test')[0] == \
+        'test_evaluator'
+    assert _tool()._labels(cfg_nomask) == 'Occ3D, no mask'
+    assert _tool()._labels(cfg_masked) == 'Occ3D'

@@ -46,10 +46,10 @@ from projects.occ_common.evaluation import (largest_confusions,
                                             read_confusion_csv)
 from projects.occ_common.utils.tool_runs import (LARGE_CLASS_MIN_IOU,
                                                  LARGE_CLASS_VOXELS,
-                                                 data_options, evaluator_keys,
-                                                 format_table, large_classes,
-                                                 last_metrics, load_tool, pct,
-                                                 prepare_world,
+                                                 data_options, format_table,
+                                                 large_classes, last_metrics,
+                                                 load_tool, occupancy_metric,
+                                                 pct, prepare_world,
                                                  read_json_lines, run,
                                                  stretched_times, tool)
 
@@ -384,13 +384,9 @@ def _labels(cfg) -> str:
     """The ground truth a config trains on, for the table's header line:
     ``'SurroundOcc'``, ``'Occ3D'`` or ``'Occ3D, no mask'`` (the loss sees
     every voxel, not only the camera-visible ones)."""
-    conventions = [
-        evaluator.get('convention')
-        for _, evaluator in evaluator_keys(cfg, 'val')
-        if evaluator.get('type') == 'OccupancyMetric'
-    ]
+    convention = occupancy_metric(cfg, 'val')[1].get('convention')
     labels = dict(surroundocc='SurroundOcc', occ3d='Occ3D').get(
-        conventions[0] if conventions else None, 'unknown')
+        convention, str(convention))
     if labels == 'Occ3D' and cfg.model.get('loss_mask_key') is None:
         labels += ', no mask'
     return labels
@@ -504,17 +500,6 @@ def _last_checkpoint(work_dir: str) -> str:
         return f.read().strip()
 
 
-def _occupancy_metric_key(config: str) -> str:
-    """The ``--cfg-options`` key of the config's test OccupancyMetric."""
-    keys = [key for key, evaluator in evaluator_keys(
-        Config.fromfile(config), 'test')
-            if evaluator['type'] == 'OccupancyMetric']
-    if len(keys) != 1:
-        raise SystemExit(f'{config}: expected one OccupancyMetric in '
-                         f'test_evaluator, found {len(keys)}')
-    return keys[0]
-
-
 def bench_run(name: str, config: str, options: List[str], args,
               data_root: Optional[str], out: str, log_path: str) -> dict:
     """Train (or resume, or reuse) one run and evaluate it.
@@ -566,7 +551,7 @@ def bench_run(name: str, config: str, options: List[str], args,
     # The GT voxels of every class, for the table's large-class line, and
     # the confusion matrix, for where the weak classes' voxels go.
     confusion_csv = osp.join(run_dir, CONFUSION)
-    occ_metric = _occupancy_metric_key(config)
+    occ_metric = occupancy_metric(Config.fromfile(config), 'test')[0]
     test_options = list(options) + [
         f'{occ_metric}.class_voxel_counts=True',
         f'{occ_metric}.confusion_file={confusion_csv}'

@@ -206,6 +206,20 @@ def evaluator_keys(cfg, split: str) -> List[tuple]:
             for i, evaluator in enumerate(evaluators)]
 
 
+def occupancy_metric(cfg, split: str) -> tuple:
+    """``(option key, config)`` of a split's one ``OccupancyMetric``.
+
+    Raises:
+        SystemExit: When the split has none or several.
+    """
+    found = [(key, evaluator) for key, evaluator in evaluator_keys(cfg, split)
+             if evaluator.get('type') == 'OccupancyMetric']
+    if len(found) != 1:
+        raise SystemExit(f'{cfg.filename}: expected one OccupancyMetric in '
+                         f'{split}_evaluator, found {len(found)}')
+    return found[0]
+
+
 def data_options(data_root: str, config: Optional[str] = None) -> List[str]:
     """``--cfg-options`` pointing every dataloader at ``data_root``.
 
