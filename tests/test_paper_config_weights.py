@@ -154,7 +154,7 @@ def test_occcyl_configs_load_imagenet_swin_and_keep_dcn_offsets(path, hub):
     assert not bool((swin.patch_embed.projection.weight == 0.02).all())
     _, state = hub
     block = model.img_encoder.backbone.layer3[0]
-    assert type(block.conv2).__name__ == 'ModulatedDeformConv2dPack'
+    assert type(block.conv2).__name__ == 'Float32DCNv2'
     assert torch.equal(block.conv2.weight, state['layer3.0.conv2.weight'])
     assert not block.conv2.conv_offset.weight.any()
     assert not block.conv2.conv_offset.bias.any()

@@ -191,7 +191,7 @@ def test_paper_configs_train_with_the_lineage_recipe():
         assert cfg.optim_wrapper.paramwise_cfg.custom_keys == {
             'img_encoder.backbone': dict(lr_mult=0.1)}
         backbone = cfg.model.img_encoder.backbone
-        assert backbone.dcn.type == 'DCNv2'
+        assert backbone.dcn.type == 'Float32DCNv2'
         assert backbone.stage_with_dcn == (False, False, True, True)
         assert cfg.model.pretrained.tpv_backbone.checkpoint.endswith(
             'swin_small_patch4_window7_224.pth')

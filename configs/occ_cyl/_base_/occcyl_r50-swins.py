@@ -101,7 +101,11 @@ model = dict(
             # Modulated deformable convs (DCNv2) in stages 3 and 4: the
             # paper cites DCN [21] beside its ResNet-50, and OCCFusion, the
             # authors' lineage, uses them there (+0.75 M parameters).
-            dcn=dict(type='DCNv2', deform_groups=1, fallback_on_stride=False),
+            # mmcv's 'DCNv2' in a float32 island: its kernels have no
+            # bfloat16 (projects/occ_common/models/layers/float32_dcn.py).
+            dcn=dict(
+                type='Float32DCNv2', deform_groups=1,
+                fallback_on_stride=False),
             stage_with_dcn=(False, False, True, True),
             # Recompute each bottleneck in the backward (not in the paper,
             # which trains on GPUs): one 6 x 928 x 1600 training iteration
