@@ -48,16 +48,16 @@ from mmengine.config import Config
 from mmengine.dataset import pseudo_collate
 from mmengine.registry import init_default_scope
 
+from projects.occ_common.apis.unlabelled_pipeline import \
+    unlabelled_test_dataset
 from projects.occ_common.datasets.single_sample import (SampleInfo,
                                                         sample_info_file)
+from projects.occ_common.engine.config_checks import (CfgOptionsAction,
+                                                      apply_cfg_options)
 from projects.occ_common.evaluation.occupancy_export import \
     write_occ3d_prediction
-from projects.occ_common.utils.config_checks import (CfgOptionsAction,
-                                                     apply_cfg_options)
-from projects.occ_common.utils.safe_pickle import (RefusedGlobalError,
-                                                   load_checkpoint_file)
-from projects.occ_common.utils.unlabelled_pipeline import \
-    unlabelled_test_dataset
+from projects.occ_common.fileio.safe_pickle import (RefusedGlobalError,
+                                                    load_checkpoint_file)
 
 
 def parse_args(argv=None):
@@ -113,7 +113,7 @@ def init_model(cfg: Config, checkpoint: str, device: str) -> torch.nn.Module:
     """The config's model with the checkpoint's weights, in eval mode.
 
     mmdet3d's ``init_model``, with the checks of ``tools/test.py``
-    (:class:`~projects.occ_common.hooks.CheckpointMatchHook`).
+    (:class:`~projects.occ_common.engine.hooks.CheckpointMatchHook`).
 
     Args:
         cfg (Config): The config.
@@ -129,7 +129,7 @@ def init_model(cfg: Config, checkpoint: str, device: str) -> torch.nn.Module:
             or shapes differ from the model's.
         RefusedGlobalError: It pickles code (nothing of it was run).
     """
-    from projects.occ_common.hooks.checkpoint_match_hook import \
+    from projects.occ_common.engine.hooks.checkpoint_match_hook import \
         load_checked_weights
     if device.startswith('cuda') and not torch.cuda.is_available():
         raise ValueError(f'--device {device}: CUDA is not available here; '
@@ -163,7 +163,7 @@ def inference_occupancy(model, dataset, index: int):
     Args:
         model (nn.Module): From :func:`init_model`.
         dataset (BaseDataset): From
-            :func:`~projects.occ_common.utils.unlabelled_pipeline.unlabelled_test_dataset`.
+            :func:`~projects.occ_common.apis.unlabelled_pipeline.unlabelled_test_dataset`.
         index (int): The sample's index.
 
     Returns:

@@ -23,11 +23,12 @@ import shutil
 import time
 from typing import List
 
-from projects.occ_common.utils.tool_runs import (LARGE_CLASS_VOXELS,
-                                                 data_options, format_table,
-                                                 large_classes, last_metrics,
-                                                 pct, prepare_world, run,
-                                                 stretched_times, tool)
+from projects.occ_common.analysis.tool_runs import (LARGE_CLASS_VOXELS,
+                                                    data_options, format_table,
+                                                    large_classes,
+                                                    last_metrics, pct,
+                                                    prepare_world, run,
+                                                    stretched_times, tool)
 
 #: (name, config, label convention, epochs). The small configs of the
 #: learning benchmark (issue 14), trained in the demo for the epochs given

@@ -35,8 +35,8 @@ import pytest
 import torch
 from mmengine.config import Config
 
+from projects.occ_common.synthetic.synthetic_batch import synthetic_batch
 from projects.occ_common.testing.cuda_autocast import cuda_like_autocast
-from projects.occ_common.testing.synthetic_batch import synthetic_batch
 
 ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
 TINY = [

@@ -152,7 +152,7 @@ def test_every_paper_graph_trains_two_ddp_steps():
     equals rank 0's exactly (0.0): DDP averaged the two ranks' gradients,
     whose losses differ.
     """
-    from projects.occ_common.testing.ddp_check import ddp_check
+    from projects.occ_common.analysis.ddp_check import ddp_check
     if len(_GRAPHS) != len(PAPER_CONFIGS):
         for path in PAPER_CONFIGS:
             cfg, model = _build(path)

@@ -3,7 +3,7 @@ r"""Every pickle the project reads goes through the restricted loaders.
 The rule, over ``projects/``, ``tools/`` and ``demo/``: outside the loader
 module (:data:`ALLOWED`, each with its reason) nothing calls an
 unpickler. Info files are read with
-``projects.occ_common.utils.load_info_file``, checkpoints with
+``projects.occ_common.fileio.load_info_file``, checkpoints with
 ``load_checkpoint_file`` (or mmengine's loaders once
 ``install_checkpoint_loader`` has run). A grep finds most of it::
 
@@ -32,7 +32,7 @@ FORBIDDEN = frozenset({
 
 #: Files that may, and why.
 ALLOWED = {
-    'projects/occ_common/utils/safe_pickle.py':
+    'projects/occ_common/fileio/safe_pickle.py':
     'the restricted loaders: pickle unpicklers with a restricted '
     'find_class and BUILD, torch.load with their pickle_module',
 }
@@ -103,7 +103,7 @@ def test_no_pickle_is_read_outside_the_restricted_loaders():
     ]
     assert not found, (
         'pickles read outside the restricted loaders (use load_info_file / '
-        'load_checkpoint_file of projects.occ_common.utils):\n' +
+        'load_checkpoint_file of projects.occ_common.fileio):\n' +
         '\n'.join(found))
 
 

@@ -13,12 +13,12 @@ from mmdet3d.registry import MODELS
 from mmengine.config import Config
 from mmengine.registry import init_default_scope
 
+from projects.occ_common.analysis.tool_runs import data_options
 from projects.occ_common.testing.tool_logs import (REPO_ROOT,
                                                    last_test_metrics,
                                                    make_converted_world,
                                                    mean_of_class_ious,
                                                    run_tool, train_losses)
-from projects.occ_common.utils.tool_runs import data_options
 
 TINY = sorted(
     glob.glob(osp.join(REPO_ROOT, 'configs', '*', '*_tiny_*.py')))

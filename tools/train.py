@@ -23,11 +23,11 @@ from mmengine.logging import print_log
 from mmengine.registry import RUNNERS
 from mmengine.runner import Runner
 
-from projects.occ_common.utils.config_checks import (CfgOptionsAction,
-                                                     apply_cfg_options,
-                                                     cfg_errors_exit)
-from projects.occ_common.utils.cpu_dist import (finalize_distributed,
-                                                setup_cpu_distributed)
+from projects.occ_common.engine.config_checks import (CfgOptionsAction,
+                                                      apply_cfg_options,
+                                                      cfg_errors_exit)
+from projects.occ_common.engine.cpu_dist import (finalize_distributed,
+                                                 setup_cpu_distributed)
 
 
 def parse_args(argv=None):

@@ -12,5 +12,5 @@ randomness = dict(seed=0)
 # Training on CPU frees and reallocates the same large activations every
 # iteration; by default glibc hands each back to the kernel and faults it in
 # again (~40 % of the small OccCylindrical's CPU time was page faults);
-# see projects/occ_common/hooks/cpu_malloc_tuning_hook.py.
+# see projects/occ_common/engine/hooks/cpu_malloc_tuning_hook.py.
 custom_hooks = _base_.custom_hooks + [dict(type='CPUMallocTuningHook')]

@@ -5,13 +5,14 @@ default_hooks = dict(
     timer=dict(type='IterTimerHook'),
     # mmengine's LoggerHook, but only rank 0 writes the test metrics json:
     # under dist_test.sh every rank rewrote it at once and could leave it
-    # unparseable; see projects/occ_common/hooks/main_process_logger_hook.py
+    # unparseable; see
+    # projects/occ_common/engine/hooks/main_process_logger_hook.py
     logger=dict(type='MainProcessLoggerHook', interval=50),
     param_scheduler=dict(type='ParamSchedulerHook'),
     # Writes each .pth atomically, reads it back, and only then deletes the
     # oldest: a kill, Ctrl-C or full disk during a save never leaves fewer
     # than one complete checkpoint; see
-    # projects/occ_common/hooks/safe_checkpoint_hook.py.
+    # projects/occ_common/engine/hooks/safe_checkpoint_hook.py.
     checkpoint=dict(type='SafeCheckpointHook', interval=1, max_keep_ckpts=3),
     sampler_seed=dict(type='DistSamplerSeedHook'),
     # Off until tools/test.py --show-dir DIR sets draw=True: then one
@@ -21,7 +22,7 @@ default_hooks = dict(
 custom_hooks = [
     # Loads checkpoints (zoo ones included) with a restricted unpickler that
     # refuses any pickled code; see
-    # projects/occ_common/hooks/weights_only_checkpoint_hook.py.
+    # projects/occ_common/engine/hooks/weights_only_checkpoint_hook.py.
     dict(type='WeightsOnlyCheckpointHook'),
     # Stops at the first NaN / inf loss term or gradient norm, and refuses
     # to save non-finite weights, naming the iteration and the term and
@@ -52,7 +53,7 @@ env_cfg = dict(
     mp_cfg=dict(mp_start_method='fork', opencv_num_threads=0),
     # nccl, mmdet3d's default and the backend for CUDA tensors. On a
     # machine without CUDA, tools/train.py and tools/test.py run the ranks
-    # with gloo instead (projects/occ_common/utils/cpu_dist.py), since nccl
+    # with gloo instead (projects/occ_common/engine/cpu_dist.py), since nccl
     # needs GPUs.
     dist_cfg=dict(backend='nccl'))
 

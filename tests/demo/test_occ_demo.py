@@ -14,12 +14,13 @@ import pytest
 import torch
 from PIL import Image
 
-from projects.occ_common.testing.real_sample import (INFO_FILE, MISSING_REASON,
-                                                     real_sample_dir)
+from projects.occ_common.analysis.real_sample import (INFO_FILE,
+                                                      MISSING_REASON,
+                                                      real_sample_dir)
+from projects.occ_common.fileio.safe_pickle import (load_checkpoint_file,
+                                                    load_info_file)
 from projects.occ_common.testing.tool_logs import (REPO_ROOT, load_tool,
                                                    run_tool)
-from projects.occ_common.utils.safe_pickle import (load_checkpoint_file,
-                                                   load_info_file)
 
 #: The tiny OccCylindrical: 96x160 network images (a 6x10 feature map), so
 #: one CPU iteration takes about a second; it takes the real 1600x900

@@ -4,7 +4,7 @@ import math
 import pytest
 import torch
 
-from projects.occ_common.testing.occ_inputs import ring_camera_rig
+from projects.occ_common.synthetic.occ_inputs import ring_camera_rig
 from projects.occ_cyl.cylindrical import (CylinderGrid,
                                           cartesian_to_cylindrical,
                                           cylindrical_to_cartesian,

@@ -8,7 +8,7 @@ from mmdet3d.structures import Det3DDataSample
 from mmdet3d.utils import register_all_modules
 
 import projects.occ_cyl  # noqa: F401
-from projects.occ_common.testing.occ_inputs import make_occ_batch
+from projects.occ_common.synthetic.occ_inputs import make_occ_batch
 
 register_all_modules(init_default_scope=False)
 

@@ -4,7 +4,7 @@ import torch
 import torch.nn.functional as F
 
 from projects.occ_common.geometry.depth import project_points
-from projects.occ_common.testing.occ_inputs import ring_camera_rig
+from projects.occ_common.synthetic.occ_inputs import ring_camera_rig
 from projects.occ_cyl import LidarPointBranch, sample_image_features
 
 

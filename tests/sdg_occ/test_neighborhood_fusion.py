@@ -275,8 +275,8 @@ def test_launches_do_not_grow_with_the_batch():
     after the first (which builds the border indices of the map shape)
     waits for the device. Counted on the path a GPU takes (no row
     blocks), forced on the CPU."""
+    from projects.occ_common.analysis.op_counting import OpCounter
     from projects.occ_common.utils.device_path import forced_accelerator_path
-    from projects.occ_common.utils.op_counting import OpCounter
     counts = []
     for batch in (1, 4):
         module = NeighborhoodFusion(8, 8, 8, embed_dims=8, num_heads=2)

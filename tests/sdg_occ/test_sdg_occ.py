@@ -9,7 +9,7 @@ import pytest
 import torch
 from mmdet3d.registry import MODELS
 
-from projects.occ_common.testing.occ_inputs import make_occ_batch
+from projects.occ_common.synthetic.occ_inputs import make_occ_batch
 from projects.sdg_occ import SDGOcc  # noqa: F401 (registers the model)
 from projects.sdg_occ.c2h_head import height_logits_to_xyz
 

@@ -4,7 +4,7 @@ import math
 import pytest
 import torch
 
-from projects.occ_common.testing.occ_inputs import ring_camera_rig
+from projects.occ_common.synthetic.occ_inputs import ring_camera_rig
 from projects.sdg_occ import (SDGViewTransform, key_frame_points,
                               points_to_depth_maps, semantic_depth_diffusion)
 

@@ -146,7 +146,7 @@ def test_diffusion_fills_pixels_when_unlabelled_cells_are_ignored(
     LiDAR depth (radius 2 cells) with such a head: cells without a return
     that get a depth were 5 and 11 of 1,056 per sample with 0-labelled
     targets, 292 and 271 with ignored ones."""
-    from projects.occ_common.testing.camera_classes import \
+    from projects.occ_common.synthetic.camera_classes import \
         sample_feature_classes
     from projects.sdg_occ import downsample_seg_labels, points_to_depth_maps
     root, samples, model = synthetic_samples

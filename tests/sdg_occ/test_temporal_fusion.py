@@ -9,7 +9,7 @@ import torch
 from mmdet3d.registry import MODELS
 
 from projects.occ_common.geometry.bev_warp import warp_bev
-from projects.occ_common.testing.occ_inputs import make_temporal_scene
+from projects.occ_common.synthetic.occ_inputs import make_temporal_scene
 from tests.sdg_occ.test_sdg_occ import CAM_CHANNELS, PC_RANGE, _batch, _cfg
 
 

@@ -12,8 +12,9 @@ import os.path as osp
 import pytest
 import torch
 
-from projects.occ_common.testing.real_sample import (INFO_FILE, MISSING_REASON,
-                                                     real_sample_dir)
+from projects.occ_common.analysis.real_sample import (INFO_FILE,
+                                                      MISSING_REASON,
+                                                      real_sample_dir)
 from projects.occ_common.testing.tool_logs import load_tool
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))

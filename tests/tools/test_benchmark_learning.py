@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 from mmengine.config import Config, DictAction
 
+from projects.occ_common.analysis import tool_runs
 from projects.occ_common.evaluation import (read_confusion_csv,
                                             write_confusion_csv)
 from projects.occ_common.testing.tool_logs import load_tool
-from projects.occ_common.utils import tool_runs
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ.py')

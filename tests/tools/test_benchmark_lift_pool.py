@@ -4,9 +4,9 @@ import os.path as osp
 
 import pytest
 
-from projects.occ_common.testing.real_sample import (MISSING_REASON,
-                                                     real_lidar2img,
-                                                     real_sample_dir)
+from projects.occ_common.analysis.real_sample import (MISSING_REASON,
+                                                      real_lidar2img,
+                                                      real_sample_dir)
 from projects.occ_common.testing.tool_logs import load_tool
 from projects.occ_cyl.cylindrical import CylinderGrid, pseudo_point_voxels
 

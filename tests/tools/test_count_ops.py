@@ -1,7 +1,7 @@
 """tools/analysis_tools/count_ops.py on the tiny SDG-Fusion config: the
 rows add up to the totals, the batch sizes are all counted, the JSON
 holds what was printed (the counting itself:
-tests/occ_common/utils/test_op_counting.py)."""
+tests/occ_common/analysis/test_op_counting.py)."""
 import json
 
 from projects.occ_common.testing.tool_logs import load_tool

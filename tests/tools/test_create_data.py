@@ -14,9 +14,9 @@ import mmengine
 import pytest
 from PIL import Image
 
+from projects.occ_common.fileio.safe_pickle import load_info_file
 from projects.occ_common.testing.tool_logs import run_create_data
 from projects.occ_common.transforms import LoadMultiViewImagesOcc
-from projects.occ_common.utils.safe_pickle import load_info_file
 
 pytestmark = pytest.mark.filterwarnings(
     'ignore:synthetic world with one scene')

@@ -13,7 +13,7 @@ import sys
 
 import pytest
 
-from projects.occ_common.testing.ddp_check import free_port
+from projects.occ_common.analysis.ddp_check import free_port
 from projects.occ_common.testing.tool_logs import last_test_metrics
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))

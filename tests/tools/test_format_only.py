@@ -18,8 +18,8 @@ import torch
 from mmengine.config import Config
 from mmengine.registry import init_default_scope
 
+from projects.occ_common.fileio.safe_pickle import load_info_file
 from projects.occ_common.testing.tool_logs import load_tool, run_tool
-from projects.occ_common.utils.safe_pickle import load_info_file
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIGS = {

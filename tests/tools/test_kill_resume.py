@@ -41,7 +41,7 @@ import torch
 from mmengine.config import Config
 from mmengine.runner import Runner
 
-from projects.occ_common.utils import load_checkpoint_file
+from projects.occ_common.fileio import load_checkpoint_file
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIG = osp.join(ROOT, 'configs', 'sdg_occ',

@@ -13,16 +13,17 @@ import uuid
 import pytest
 import torch
 
+from projects.occ_common.fileio import (CorruptFileError,
+                                        UnsafeCheckpointError,
+                                        load_checkpoint_file)
 from projects.occ_common.testing.tool_logs import load_tool, run_tool
-from projects.occ_common.utils import (CorruptFileError, UnsafeCheckpointError,
-                                       load_checkpoint_file)
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ.py')
 
 
 config_checks = importlib.import_module(
-    'projects.occ_common.utils.config_checks')
+    'projects.occ_common.engine.config_checks')
 test_tool, train_tool = load_tool('tools/test.py'), load_tool('tools/train.py')
 
 

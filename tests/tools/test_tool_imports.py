@@ -1,7 +1,7 @@
 """Every tool imports the same way whatever the working directory.
 
 The tools import their helpers and the plugin as installed packages
-(``projects.occ_common.utils.cpu_dist`` and ``.benchmarking``), not from
+(``projects.occ_common.engine.cpu_dist`` and ``.benchmarking``), not from
 ``tools/`` on ``sys.path`` and without editing ``sys.path``: a tool loaded
 as a module from a file (as the tests do) and a tool run from another
 folder both work.

@@ -35,10 +35,10 @@ def hand_computed_miou(checkpoint):
     IoU_c = TP_c / (TP_c + FP_c + FN_c) with counts summed over all four
     val samples (the SurroundOcc convention), reported in percent.
     """
+    from projects.occ_common.fileio import load_checkpoint_file
     from projects.occ_common.testing.toy_model import (ToyOccupancyDataset,
                                                        ToyOccupancyModel)
-    from projects.occ_common.utils import load_weights_only
-    ckpt = load_weights_only(checkpoint, map_location='cpu')
+    ckpt = load_checkpoint_file(checkpoint, map_location='cpu')
     model = ToyOccupancyModel(in_channels=3, num_classes=3)
     model.load_state_dict(ckpt['state_dict'])
     dataset = ToyOccupancyDataset(num_samples=4, num_classes=3, seed=100)
@@ -74,8 +74,8 @@ def test_train_resume_and_test(tmp_path):
     output = proc.stdout + proc.stderr
     assert 'resumed epoch: 2, iter: 8' in output
     ckpt3 = osp.join(work_dir, 'epoch_3.pth')
-    from projects.occ_common.utils import load_weights_only
-    meta = load_weights_only(ckpt3)['meta']
+    from projects.occ_common.fileio import load_checkpoint_file
+    meta = load_checkpoint_file(ckpt3)['meta']
     # 8 samples / batch 2 = 4 iterations per epoch: 3 epochs = 12 iters.
     assert (meta['epoch'], meta['iter']) == (3, 12)
 

@@ -11,8 +11,8 @@ import pytest
 import torch
 from PIL import Image
 
+from projects.occ_common.fileio import load_checkpoint_file
 from projects.occ_common.testing.tool_logs import load_tool
-from projects.occ_common.utils import load_checkpoint_file
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ.py')

@@ -39,7 +39,7 @@ with ``--synthetic-batch`` random data of the shapes the config declares:
 label grid, for configs whose data is not at hand.
 
 Peak memory is measured as every benchmark tool does
-(:class:`projects.occ_common.utils.benchmarking.PeakMemory`): on CUDA
+(:class:`projects.occ_common.analysis.benchmarking.PeakMemory`): on CUDA
 ``torch.cuda.max_memory_allocated`` during one call, on CPU the process's
 resident-set high-water mark. ``forward_memory_mb`` is the part added by
 the call, ``peak_memory_mb`` the whole process (or all CUDA tensors; with
@@ -64,14 +64,15 @@ from typing import Callable, Dict, List, Optional, Tuple
 import torch
 from mmengine.config import Config, DictAction
 
-from projects.occ_common.testing.synthetic_batch import (NUSCENES_SWEEP_POINTS,
-                                                         synthetic_batch)
-from projects.occ_common.utils.benchmarking import (PeakMemory,
-                                                    alternating_runs,
-                                                    count_gflop, matmul_call,
-                                                    matmul_share, summarise)
-from projects.occ_common.utils.config_checks import (cfg_errors_exit,
-                                                     merge_cfg_options)
+from projects.occ_common.analysis.benchmarking import (PeakMemory,
+                                                       alternating_runs,
+                                                       count_gflop,
+                                                       matmul_call,
+                                                       matmul_share, summarise)
+from projects.occ_common.engine.config_checks import (cfg_errors_exit,
+                                                      merge_cfg_options)
+from projects.occ_common.synthetic.synthetic_batch import (
+    NUSCENES_SWEEP_POINTS, synthetic_batch)
 from projects.occ_common.utils.glibc_malloc import (MMAP_THRESHOLD,
                                                     TRIM_THRESHOLD,
                                                     tune_glibc_malloc)
@@ -210,7 +211,7 @@ class Subject:
         if checkpoint:
             # The config's plugin provides the restricted loader; nothing
             # is installed on import.
-            from projects.occ_common.utils import install_checkpoint_loader
+            from projects.occ_common.fileio import install_checkpoint_loader
             install_checkpoint_loader()
             load_checkpoint(self.model, checkpoint, map_location='cpu')
         self.model.to(self.device)

@@ -44,7 +44,7 @@ import time
 import numpy as np
 import torch
 
-from projects.occ_common.utils.benchmarking import summarise
+from projects.occ_common.analysis.benchmarking import summarise
 
 REPO = osp.dirname(
     osp.dirname(osp.dirname(osp.abspath(__file__))))
@@ -132,8 +132,7 @@ def parse_args(argv=None):
 def make_world(root, image_size):
     """Generate and convert a synthetic world with real-sized sensors."""
     from projects.occ_common.datasets.converters import nuscenes_occ_converter
-    from projects.occ_common.datasets.synthetic import \
-        generate_synthetic_nuscenes
+    from projects.occ_common.synthetic import generate_synthetic_nuscenes
     start = time.perf_counter()
     # 1024 azimuth steps x 32 beams ~ nuScenes' ~34k points per sweep.
     generate_synthetic_nuscenes(
@@ -222,12 +221,12 @@ def make_real_root(sample_dir, root):
     Returns:
         str: The written info file.
     """
+    from projects.occ_common.analysis.real_sample import INFO_FILE
     from projects.occ_common.datasets.converters import extend_mmdet3d_infos
     from projects.occ_common.datasets.nuscenes_classes import \
         LIDARSEG_RAW_CLASS_NAMES
     from projects.occ_common.datasets.occ_formats import OCC_FORMATS
-    from projects.occ_common.testing.real_sample import INFO_FILE
-    from projects.occ_common.utils.safe_pickle import load_info_file
+    from projects.occ_common.fileio.safe_pickle import load_info_file
     infos = load_info_file(osp.join(sample_dir, INFO_FILE))
     for name in os.listdir(sample_dir):
         if name != INFO_FILE and not name.endswith('.md'):
@@ -355,8 +354,8 @@ def real_sample_report(args):
         seconds per step, slowest first), ``img_input`` and ``points``.
         Only ``skipped`` when the sample is absent.
     """
-    from projects.occ_common.testing.real_sample import (INFO_FILE,
-                                                         REAL_SAMPLE_DIR)
+    from projects.occ_common.analysis.real_sample import (INFO_FILE,
+                                                          REAL_SAMPLE_DIR)
     sample_dir = args.real_sample or REAL_SAMPLE_DIR
     report = dict(sample_dir=sample_dir)
     if not osp.isfile(osp.join(sample_dir, INFO_FILE)):

@@ -42,16 +42,17 @@ from typing import Dict, List, Optional
 
 from mmengine import Config
 
+from projects.occ_common.analysis.tool_runs import (LARGE_CLASS_MIN_IOU,
+                                                    LARGE_CLASS_VOXELS,
+                                                    data_options, format_table,
+                                                    large_classes,
+                                                    last_metrics, load_tool,
+                                                    occupancy_metric, pct,
+                                                    prepare_world,
+                                                    read_json_lines, run,
+                                                    stretched_times, tool)
 from projects.occ_common.evaluation import (largest_confusions,
                                             read_confusion_csv)
-from projects.occ_common.utils.tool_runs import (LARGE_CLASS_MIN_IOU,
-                                                 LARGE_CLASS_VOXELS,
-                                                 data_options, format_table,
-                                                 large_classes, last_metrics,
-                                                 load_tool, occupancy_metric,
-                                                 pct, prepare_world,
-                                                 read_json_lines, run,
-                                                 stretched_times, tool)
 
 #: The camera-only LSS baseline of SDG-OCC's Table 3 as --cfg-options of
 #: an SDG-Fusion config (the deltas of configs/sdg_occ/ablations/

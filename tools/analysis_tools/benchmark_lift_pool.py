@@ -16,7 +16,7 @@ Measures, at the size a config describes (the paper's by default: 6 views of
    the voxel indices of the real calibration (a synthetic six-camera ring
    where the sample is absent). Each measurement runs in a fresh child
    process: the peak RSS minus the RSS once the inputs exist
-   (:class:`projects.occ_common.utils.benchmarking.PeakMemory`) is the
+   (:class:`projects.occ_common.analysis.benchmarking.PeakMemory`) is the
    memory the lift itself needs;
 3. ``--model``: the forward latency and peak memory of the whole model,
    optionally at a reduced image size (``--img-scale``) when the full one
@@ -46,11 +46,11 @@ from mmengine.config import Config
 from mmengine.registry import init_default_scope
 from mmengine.utils import import_modules_from_strings
 
-from projects.occ_common.testing.real_sample import (MISSING_REASON,
-                                                     real_cameras,
-                                                     real_lidar2img,
-                                                     real_sample_dir)
-from projects.occ_common.utils.benchmarking import PeakMemory
+from projects.occ_common.analysis.benchmarking import PeakMemory
+from projects.occ_common.analysis.real_sample import (MISSING_REASON,
+                                                      real_cameras,
+                                                      real_lidar2img,
+                                                      real_sample_dir)
 
 #: Table VI of the paper: depth interval d (m) -> pseudo points before /
 #: after the per-voxel max pool, and the GPU memory.

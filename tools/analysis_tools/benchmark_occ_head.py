@@ -31,8 +31,8 @@ from mmengine.registry import init_default_scope
 from mmengine.utils import import_modules_from_strings
 from torch import Tensor
 
-from projects.occ_common.utils.benchmarking import (alternating_runs,
-                                                    round_medians)
+from projects.occ_common.analysis.benchmarking import (alternating_runs,
+                                                       round_medians)
 from projects.occ_cyl.cylindrical_occ_head import sample_tpv_planes
 from projects.occ_cyl.group_pooling import PLANE_POOL_AXES
 

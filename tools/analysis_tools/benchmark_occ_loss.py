@@ -46,8 +46,8 @@ from mmengine.registry import Registry, init_default_scope
 from mmengine.utils import import_modules_from_strings
 from torch import nn
 
-from projects.occ_common.utils.benchmarking import (alternating_runs,
-                                                    round_medians)
+from projects.occ_common.analysis.benchmarking import (alternating_runs,
+                                                       round_medians)
 
 ROOT = osp.dirname(
     osp.dirname(osp.dirname(osp.abspath(__file__))))

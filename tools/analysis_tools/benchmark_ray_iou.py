@@ -33,9 +33,9 @@ from typing import List, Tuple
 import numpy as np
 import torch
 
+from projects.occ_common.analysis.benchmarking import timed_runs
 from projects.occ_common.datasets.nuscenes_classes import OCC3D_CLASS_NAMES
 from projects.occ_common.evaluation import cast_rays, count_ray_hits
-from projects.occ_common.utils.benchmarking import timed_runs
 from projects.occ_common.utils.glibc_malloc import (MMAP_THRESHOLD,
                                                     TRIM_THRESHOLD,
                                                     tune_glibc_malloc)

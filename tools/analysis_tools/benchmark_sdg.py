@@ -38,8 +38,8 @@ Example::
         --real-sample ../shared/data/nuscenes_real_sample
 
 Like the other tools it imports no plugin code itself: the configs'
-``custom_imports`` register and provide it (and the test helpers of
-``projects.occ_common.testing`` give the synthetic oracle).
+``custom_imports`` register and provide it (and
+``projects.occ_common.synthetic`` gives the synthetic oracle).
 """
 import argparse
 import glob
@@ -55,8 +55,8 @@ from mmengine.config import Config
 from mmengine.registry import init_default_scope
 from mmengine.utils import import_modules_from_strings
 
-from projects.occ_common.utils.benchmarking import timed_runs
-from projects.occ_common.utils.safe_pickle import load_info_file
+from projects.occ_common.analysis.benchmarking import timed_runs
+from projects.occ_common.fileio.safe_pickle import load_info_file
 
 ROOT = osp.dirname(
     osp.dirname(osp.dirname(osp.abspath(__file__))))
@@ -308,7 +308,7 @@ def main(argv=None):
     modules = import_modules_from_strings(**cfg.custom_imports)
     sdg = modules[-1]
     testing = import_modules_from_strings(
-        'projects.occ_common.testing.camera_classes')
+        'projects.occ_common.synthetic.camera_classes')
     init_default_scope(cfg.default_scope)
     model = MODELS.build(cfg.model)
     vt = model.view_transform

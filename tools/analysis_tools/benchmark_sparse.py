@@ -11,7 +11,7 @@ output difference between the backends.
 
 Peak memory is the growth of the process's resident set during one call,
 ``VmHWM - VmRSS_before`` with the heap trimmed and the mark reset first
-(:class:`projects.occ_common.utils.benchmarking.PeakMemory`, shared by the
+(:class:`projects.occ_common.analysis.benchmarking.PeakMemory`, shared by the
 benchmark tools): it counts every allocator (torch's, spconv's C++
 buffers), which Python's ``tracemalloc`` would not.
 
@@ -39,8 +39,8 @@ from typing import Callable, Dict, List, Tuple
 
 import torch
 
+from projects.occ_common.analysis.benchmarking import PeakMemory
 from projects.occ_common.models import sparse
-from projects.occ_common.utils.benchmarking import PeakMemory
 
 RANGE = (-40.0, -40.0, -1.0, 40.0, 40.0, 5.4)
 VOXEL = 0.1

@@ -16,8 +16,8 @@ Example::
         temporal.json
 
 Like the other tools it imports no plugin code itself: the config's
-``custom_imports`` register it (and the test helpers of
-``projects.occ_common.testing`` give the synthetic scene).
+``custom_imports`` register it (and ``projects.occ_common.synthetic``
+gives the synthetic scene).
 """
 import argparse
 import json
@@ -30,7 +30,7 @@ from mmengine.config import Config
 from mmengine.registry import init_default_scope
 from mmengine.utils import import_modules_from_strings
 
-from projects.occ_common.utils.benchmarking import timed_runs
+from projects.occ_common.analysis.benchmarking import timed_runs
 
 ROOT = osp.dirname(
     osp.dirname(osp.dirname(osp.abspath(__file__))))
@@ -71,7 +71,7 @@ def main(argv=None):
     cfg.model.img_backbone.init_cfg = None
     import_modules_from_strings(**cfg.custom_imports)
     testing = import_modules_from_strings(
-        'projects.occ_common.testing.occ_inputs')
+        'projects.occ_common.synthetic.occ_inputs')
     init_default_scope(cfg.default_scope)
     if cfg.model.get('num_frames', 1) != 2:
         raise ValueError(f'{args.config} is not a two-frame config')

@@ -6,7 +6,7 @@
 
 The generator of the synthetic world writes, next to every camera image, the
 raw lidarseg class seen at each pixel (``synthetic_gt/cam_labels``, see
-:func:`projects.occ_common.datasets.synthetic.camera_label_path`; real
+:func:`projects.occ_common.synthetic.camera_label_path`; real
 nuScenes has no such maps). For the key frames of a split (the config's
 test or training info file) this counts, per occupancy class: the share of
 all pixels of the six views, and the cells of a ``--cells`` grid laid over
@@ -26,14 +26,14 @@ from typing import Dict, Sequence, Tuple
 import numpy as np
 from mmengine.config import Config
 
+from projects.occ_common.apis.split_dataset import (add_split_arguments,
+                                                    build_split_dataset,
+                                                    load_tool_config)
 from projects.occ_common.datasets.nuscenes_classes import (OCC_CLASS_NAMES,
                                                            lidarseg_to_occ16)
-from projects.occ_common.datasets.synthetic import camera_label_path
-from projects.occ_common.utils.config_checks import (CfgOptionsAction,
-                                                     cfg_errors_exit)
-from projects.occ_common.utils.split_dataset import (add_split_arguments,
-                                                     build_split_dataset,
-                                                     load_tool_config)
+from projects.occ_common.engine.config_checks import (CfgOptionsAction,
+                                                      cfg_errors_exit)
+from projects.occ_common.synthetic import camera_label_path
 
 #: Name of occupancy label 0 in the pixel maps: the sky (raw class 0 of
 #: the maps) and lidarseg noise.

@@ -2,7 +2,7 @@
 step, per top-level module, at a config's input size.
 
 Runs on any device (the CPU counts what a GPU would launch: see
-:mod:`projects.occ_common.utils.op_counting`; where the CPU and GPUs take
+:mod:`projects.occ_common.analysis.op_counting`; where the CPU and GPUs take
 different code paths, the GPU's is counted unless ``--cpu-path``, see
 :mod:`projects.occ_common.utils.device_path`): builds the config's model,
 runs one warm-up call (caches fill, as in a long run), then one counted
@@ -22,11 +22,11 @@ from typing import Dict, List
 import torch
 from mmengine.config import DictAction
 
-from projects.occ_common.testing.synthetic_batch import synthetic_batch
-from projects.occ_common.utils.config_checks import (cfg_errors_exit,
-                                                     merge_cfg_options)
+from projects.occ_common.analysis.op_counting import OpCounter
+from projects.occ_common.engine.config_checks import (cfg_errors_exit,
+                                                      merge_cfg_options)
+from projects.occ_common.synthetic.synthetic_batch import synthetic_batch
 from projects.occ_common.utils.device_path import forced_accelerator_path
-from projects.occ_common.utils.op_counting import OpCounter
 
 
 def parse_args(argv=None):

@@ -29,12 +29,12 @@ import numpy as np
 import torch
 from mmengine.config import Config
 
+from projects.occ_common.apis.split_dataset import (add_split_arguments,
+                                                    labelled_samples,
+                                                    load_tool_config)
+from projects.occ_common.engine.config_checks import (CfgOptionsAction,
+                                                      cfg_errors_exit)
 from projects.occ_common.evaluation import OccupancyMetric
-from projects.occ_common.utils.config_checks import (CfgOptionsAction,
-                                                     cfg_errors_exit)
-from projects.occ_common.utils.split_dataset import (add_split_arguments,
-                                                     labelled_samples,
-                                                     load_tool_config)
 from projects.occ_common.visualization.camera_overlay import voxel_centres
 from projects.occ_cyl.cylindrical import CylinderGrid, cartesian_to_cylindrical
 

@@ -4,7 +4,7 @@ Each config's model is trained by ``--ranks`` processes in one process
 group (nccl with a GPU a rank on CUDA, gloo on the CPU), wrapped in
 mmengine's ``MMDistributedDataParallel`` as ``tools/train.py`` wraps it
 (``find_unused_parameters`` from the config), on random batches of the
-config's shapes, one per rank (:mod:`projects.occ_common.testing.ddp_check`).
+config's shapes, one per rank (:mod:`projects.occ_common.analysis.ddp_check`).
 It says, per config, whether DDP trained it, which trainable parameters
 got no gradient, the losses, the seconds a step and (CUDA) the peak
 memory, and whether every rank ended with rank 0's weights::
@@ -22,7 +22,7 @@ from typing import Dict, List
 import torch
 from mmengine.config import DictAction
 
-from projects.occ_common.testing.ddp_check import ddp_check
+from projects.occ_common.analysis.ddp_check import ddp_check
 
 
 def parse_args(argv=None):

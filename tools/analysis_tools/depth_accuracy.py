@@ -23,9 +23,9 @@ from typing import Dict, Optional
 import torch
 from mmengine.config import DictAction
 
-from projects.occ_common.utils.config_checks import cfg_errors_exit
-from projects.occ_common.utils.split_dataset import (add_split_arguments,
-                                                     build_split_dataset)
+from projects.occ_common.apis.split_dataset import (add_split_arguments,
+                                                    build_split_dataset)
+from projects.occ_common.engine.config_checks import cfg_errors_exit
 
 
 def parse_args(argv=None):
@@ -54,7 +54,7 @@ def build(args):
         tuple: ``(model, dataset)``, the model in eval mode on
         ``args.device``.
     """
-    from projects.occ_common.utils import build_trained_model
+    from projects.occ_common.apis import build_trained_model
 
     cfg, model = build_trained_model(
         args.config, args.checkpoint, args.cfg_options, args.device,

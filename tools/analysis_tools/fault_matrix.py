@@ -22,7 +22,7 @@ if a case's class is not the one :data:`CASES` expects. A case is a
 ``'handled'``), ``make(folder, marker)`` writing its file under ``folder``
 (in the parent) and returning its path, and ``load(path)`` loading it
 through the entry point (in the child). The hostile files come from
-:mod:`projects.occ_common.testing.hostile_files`.
+:mod:`projects.occ_common.analysis.hostile_files`.
 """
 import argparse
 import collections
@@ -38,10 +38,9 @@ from typing import Any, Callable, List, NamedTuple
 import numpy as np
 import torch
 
-from projects.occ_common.testing import hostile_files as hostile
-from projects.occ_common.utils.safe_pickle import (install_checkpoint_loader,
-                                                   load_checkpoint_file,
-                                                   load_info_file)
+from projects.occ_common.analysis import hostile_files as hostile
+from projects.occ_common.fileio import (install_checkpoint_loader,
+                                        load_checkpoint_file, load_info_file)
 
 ROOT = osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))
 CONFIG = osp.join(ROOT, 'tests', 'data', 'configs', 'toy_occ.py')
@@ -90,7 +89,7 @@ def _mmengine(url):
 def _resume(path):
     """tools/train.py --resume: the recovery hook reads the work dir's
     epoch_N.pth."""
-    from projects.occ_common.hooks.checkpoint_recovery_hook import \
+    from projects.occ_common.engine.hooks.checkpoint_recovery_hook import \
         repair_work_dir
     return repair_work_dir(osp.dirname(path))
 
@@ -99,7 +98,7 @@ def _tool(script, *argv):
     """``main`` of a tool, ``{path}`` in ``argv`` replaced."""
 
     def load(path):
-        from projects.occ_common.utils.tool_runs import load_tool
+        from projects.occ_common.analysis.tool_runs import load_tool
         work = osp.join(osp.dirname(path), 'work')
         return load_tool(script).main(
             [a.format(path=path, work=work) for a in argv])
@@ -109,7 +108,7 @@ def _tool(script, *argv):
 
 def _sdg_real_sample(path):
     """benchmark_sdg.py --real-sample: the folder's one info file."""
-    from projects.occ_common.utils.tool_runs import load_tool
+    from projects.occ_common.analysis.tool_runs import load_tool
     tool = load_tool('tools/analysis_tools/benchmark_sdg.py')
     return tool.real_sample(None, osp.dirname(path))
 
@@ -184,7 +183,7 @@ def _copied_work_dir(folder, marker):
 def _auto_resume_target(path):
     """tools/train.py --resume in the copied work dir: the pointer must
     still name the latest step (else: data loss, an error naming none)."""
-    from projects.occ_common.hooks.checkpoint_recovery_hook import \
+    from projects.occ_common.engine.hooks.checkpoint_recovery_hook import \
         repair_work_dir
     folder = osp.dirname(path)
     repair_work_dir(folder)
@@ -197,14 +196,15 @@ def _auto_resume_target(path):
 
 def _resume_before_later_steps(path):
     """tools/train.py --resume epoch_1.pth next to epoch_2/3.pth."""
-    from projects.occ_common.hooks.checkpoint_recovery_hook import \
+    from projects.occ_common.engine.hooks.checkpoint_recovery_hook import \
         check_no_later_checkpoint
     return check_no_later_checkpoint(osp.dirname(path), path)
 
 
 def _rng_checkpoint(folder, marker):
     """A checkpoint of RandomStateHook (ByteTensor, numpy, Python)."""
-    from projects.occ_common.hooks.random_state_hook import get_random_state
+    from projects.occ_common.engine.hooks.random_state_hook import \
+        get_random_state
     path = osp.join(folder, 'rng.pth')
     torch.save(dict(meta={}, rng_state=dict(
         world_size=1, ranks=[get_random_state()])), path)

@@ -22,12 +22,12 @@ from typing import Dict, Sequence
 import numpy as np
 from mmengine.config import Config
 
+from projects.occ_common.apis.split_dataset import (add_split_arguments,
+                                                    labelled_samples,
+                                                    load_tool_config)
+from projects.occ_common.engine.config_checks import (CfgOptionsAction,
+                                                      cfg_errors_exit)
 from projects.occ_common.transforms.point_labels import point_voxel_index
-from projects.occ_common.utils.config_checks import (CfgOptionsAction,
-                                                     cfg_errors_exit)
-from projects.occ_common.utils.split_dataset import (add_split_arguments,
-                                                     labelled_samples,
-                                                     load_tool_config)
 from projects.occ_common.visualization.camera_overlay import voxel_centres
 
 

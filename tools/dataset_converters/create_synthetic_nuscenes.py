@@ -5,13 +5,13 @@ and Occ3D occupancy labels) for demos and tests.
         data/nuscenes_synthetic \\
         --scenes 2 --samples 4 --sweeps 10 --image-size 480 270 --seed 0
 
-See ``projects/occ_common/datasets/synthetic/generate.py`` for the layout.
+See ``projects/occ_common/synthetic/generate.py`` for the layout.
 """
 import argparse
 import json
 
-from projects.occ_common.datasets.synthetic import (
-    CONDITIONS, generate_synthetic_nuscenes)
+from projects.occ_common.synthetic import (CONDITIONS,
+                                           generate_synthetic_nuscenes)
 
 
 def parse_args(argv=None):

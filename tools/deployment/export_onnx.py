@@ -130,7 +130,7 @@ def parse_args(argv=None):
         help='also time onnxruntime against PyTorch on the CPU in this many '
         'alternating rounds, on the first --verify sample (default: 0, '
         'no timing)')
-    from projects.occ_common.utils.config_checks import CfgOptionsAction
+    from projects.occ_common.engine.config_checks import CfgOptionsAction
     parser.add_argument(
         '--cfg-options',
         nargs='+',
@@ -150,9 +150,9 @@ def load_model(cfg, checkpoint: str) -> torch.nn.Module:
     """
     from mmdet3d.registry import MODELS
 
-    from projects.occ_common.hooks.checkpoint_match_hook import \
+    from projects.occ_common.engine.hooks.checkpoint_match_hook import \
         load_checked_weights
-    from projects.occ_common.utils.safe_pickle import load_checkpoint_file
+    from projects.occ_common.fileio.safe_pickle import load_checkpoint_file
     torch.manual_seed(0)
     model = MODELS.build(cfg.model)
     if checkpoint != 'none':
@@ -231,9 +231,9 @@ def latency(model, spec, session, batch: dict, rounds: int) -> Dict:
     same module in PyTorch and, for the prediction, of the model's own
     ``_forward`` (its data preprocessor and default CPU path), timed in
     alternating rounds after one untimed round."""
+    from projects.occ_common.analysis.benchmarking import (alternating_runs,
+                                                           round_medians)
     from projects.occ_common.deployment import reference_logits, run_graph
-    from projects.occ_common.utils.benchmarking import (alternating_runs,
-                                                        round_medians)
     feeds = spec.feeds(batch)
 
     def module():
@@ -291,8 +291,8 @@ def main(argv=None) -> Dict:
 
     from projects.occ_common.deployment import (DEFAULT_OPSET, onnx_session,
                                                 synthetic_sample)
-    from projects.occ_common.utils.config_checks import apply_cfg_options
-    from projects.occ_common.utils.safe_pickle import RefusedGlobalError
+    from projects.occ_common.engine.config_checks import apply_cfg_options
+    from projects.occ_common.fileio.safe_pickle import RefusedGlobalError
     if args.threads:
         torch.set_num_threads(args.threads)
     opset = args.opset or DEFAULT_OPSET

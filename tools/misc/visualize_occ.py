@@ -35,8 +35,8 @@ from typing import Dict, Optional, Sequence
 import numpy as np
 import torch
 
-from projects.occ_common.utils.config_checks import (CfgOptionsAction,
-                                                     cfg_errors_exit)
+from projects.occ_common.engine.config_checks import (CfgOptionsAction,
+                                                      cfg_errors_exit)
 from projects.occ_common.visualization import (convention_classes,
                                                render_data_sample,
                                                sample_field, save_png)
@@ -221,7 +221,7 @@ def predict_sample(args):
     from mmengine.dataset import pseudo_collate
     from mmengine.registry import DATASETS
 
-    from projects.occ_common.utils import build_trained_model
+    from projects.occ_common.apis import build_trained_model
 
     cfg, model = build_trained_model(
         args.config, args.checkpoint, args.cfg_options, args.device,

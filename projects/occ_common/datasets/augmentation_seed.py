@@ -14,7 +14,7 @@ seeded from ``(seed, epoch, index)`` and restored afterwards, so
 - every epoch still draws new augmentations.
 
 ``epoch`` reaches the dataloader workers through a tensor in shared memory
-(:class:`EpochSeed`), which :class:`~projects.occ_common.hooks.
+(:class:`EpochSeed`), which :class:`~projects.occ_common.engine.hooks.
 AugmentationSeedHook` sets before each training epoch, before the epoch's
 first index is sent to a worker (persistent workers included).
 

@@ -8,7 +8,7 @@ from mmdet3d.registry import DATASETS
 from mmengine.dataset import BaseDataset
 from mmengine.fileio import get_local_path
 
-from ..utils.safe_pickle import load_info_file
+from ..fileio.safe_pickle import load_info_file
 from .augmentation_seed import EpochSeed
 from .info_format import CAMERA_NAMES, as_matrix, check_info_file
 from .occ_formats import IGNORE_INDEX, OCC_FORMATS

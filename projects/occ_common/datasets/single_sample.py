@@ -23,7 +23,7 @@ import os.path as osp
 import warnings
 from typing import Mapping, NamedTuple, Optional
 
-from ..utils.safe_pickle import load_info_file
+from ..fileio.safe_pickle import load_info_file
 from .info_format import INFO_VERSION, check_info_file
 
 

@@ -107,7 +107,7 @@ def synthetic_sample(cfg: Config,
         dict: ``inputs`` and ``data_samples``, as the dataloader gives
         them.
     """
-    from projects.occ_common.testing.synthetic_batch import synthetic_batch
+    from projects.occ_common.synthetic.synthetic_batch import synthetic_batch
     if num_points is None:
         num_points = 1000 + 500 * int(seed)
     batch, _ = synthetic_batch(cfg, 1, int(num_points), seed=int(seed))
@@ -144,9 +144,9 @@ def info_file_sample(cfg: Config,
     Returns:
         dict: ``inputs`` and ``data_samples`` of one sample, collated.
     """
-    from projects.occ_common.datasets.single_sample import sample_info_file
-    from projects.occ_common.utils.unlabelled_pipeline import \
+    from projects.occ_common.apis.unlabelled_pipeline import \
         unlabelled_test_dataset
+    from projects.occ_common.datasets.single_sample import sample_info_file
     data_root = data_root or osp.dirname(osp.abspath(info_file))
     sample = sample_info_file(info_file, data_root, tmp_dir, sample_idx,
                               sample_token)
@@ -204,7 +204,7 @@ def config_time_dim(cfg: Config) -> Optional[int]:
         int | None: ``use_dim.index(4)``, or None where the pipeline loads
         no sweeps' time column.
     """
-    from projects.occ_common.utils.unlabelled_pipeline import innermost_dataset
+    from projects.occ_common.apis.unlabelled_pipeline import innermost_dataset
     dataset = innermost_dataset(cfg.test_dataloader.dataset)
     for step in dataset.get('pipeline', []):
         if step.get('type') == 'LoadOccPointsFromMultiSweeps':

@@ -19,7 +19,7 @@ from typing import Dict, List, Optional, Sequence
 import numpy as np
 
 from ..datasets.info_format import check_info_file
-from ..utils.safe_pickle import load_info_file
+from ..fileio.safe_pickle import load_info_file
 
 #: Origins kept per sample at most.
 MAX_RAY_ORIGINS = 8

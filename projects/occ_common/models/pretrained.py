@@ -44,7 +44,7 @@ Here instead:
 * ``torchvision://NAME`` and ``http(s)://`` checkpoints are fetched into
   torch's hub cache (``$TORCH_HOME/hub/checkpoints``) without torchvision,
   and every file is read with the library's restricted unpickler
-  (:func:`~projects.occ_common.utils.load_checkpoint_file`): tensors and
+  (:func:`~projects.occ_common.fileio.load_checkpoint_file`): tensors and
   containers only, nothing in the file can run.
 """
 import logging
@@ -57,7 +57,7 @@ import torch
 from mmengine.logging import print_log
 from torch import Tensor, nn
 
-from ..utils.safe_pickle import load_checkpoint_file
+from ..fileio.safe_pickle import load_checkpoint_file
 
 #: torchvision's ImageNet weights (``IMAGENET1K_V1``, the file mmengine's
 #: ``torchvision://NAME`` resolves to), fetched without torchvision.

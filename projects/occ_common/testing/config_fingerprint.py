@@ -26,8 +26,8 @@ from typing import Dict, List, Optional
 
 from torch import nn
 
-REPO_ROOT = osp.dirname(
-    osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__)))))
+from ..analysis.tool_runs import REPO_ROOT
+
 FIXTURE = osp.join(REPO_ROOT, 'tests', 'data', 'config_fingerprints.json')
 
 

@@ -3,7 +3,7 @@
 Importing this module (a test lists it in ``custom_imports``) registers the
 file backend ``faulty_local``: the ``atomic_local`` backend whose
 ``at_call``-th ``put`` (1-based, counted per process) fails as ``fault``
-says, inside the real :func:`~projects.occ_common.hooks.atomic_write`
+says, inside the real :func:`~projects.occ_common.engine.hooks.atomic_write`
 (calls are counted per target folder, as mmengine builds a new backend
 for every save):
 
@@ -28,7 +28,7 @@ from unittest import mock
 
 from mmengine.fileio import register_backend
 
-from ..hooks.atomic_file_backend import AtomicLocalBackend
+from ..fileio.atomic_file_backend import AtomicLocalBackend
 
 FAULTS = ('sigkill', 'sigint', 'enospc', 'sigkill_after')
 

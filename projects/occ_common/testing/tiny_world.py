@@ -3,7 +3,7 @@
 ``make_tiny_world(root)`` writes (in about two seconds) one scene of two key
 frames with 160x90 images and ~1.6k LiDAR points per sweep, in the full
 nuScenes / SurroundOcc / Occ3D layout of
-:func:`projects.occ_common.datasets.synthetic.generate_synthetic_nuscenes`.
+:func:`projects.occ_common.synthetic.generate_synthetic_nuscenes`.
 Calling it again with the same arguments on the same root reuses the world
 (unless the generator's code changed), so a session-scoped fixture can share
 it::
@@ -25,9 +25,9 @@ import hashlib
 import json
 import os.path as osp
 
-from projects.occ_common.datasets import synthetic
-from projects.occ_common.datasets.synthetic import (
-    META_PATH, generate_synthetic_nuscenes)
+from projects.occ_common import synthetic
+from projects.occ_common.synthetic import (META_PATH,
+                                           generate_synthetic_nuscenes)
 
 #: Generator arguments of the tiny world.
 TINY_WORLD_DEFAULTS = dict(num_scenes=1, samples_per_scene=2,

@@ -8,10 +8,7 @@ import sys
 from typing import Dict, List, Sequence, Tuple
 
 # load_tool is re-exported: the tests load tool scripts through this module.
-from projects.occ_common.utils.tool_runs import load_tool
-
-REPO_ROOT = osp.dirname(
-    osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__)))))
+from projects.occ_common.analysis.tool_runs import REPO_ROOT, load_tool
 
 
 def last_test_metrics(work_dir: str, prefix: str = 'occ/') -> Dict:

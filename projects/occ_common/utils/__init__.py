@@ -1,18 +1,6 @@
-"""Utilities of the occupancy plugins."""
-from .safe_pickle import (CHECKPOINT_GLOBALS, INFO_GLOBALS, CorruptFileError,
-                          RefusedGlobalError, UnsafeCheckpointError,
-                          install_checkpoint_loader, load_checkpoint_file,
-                          load_info_file)
-from .split_dataset import add_split_arguments, build_split_dataset
-from .trained_model import build_trained_model
+"""Runtime primitives of the occupancy plugins: which code path a device
+takes (:mod:`.device_path`), float32 islands under autocast
+(:mod:`.precision`) and glibc's malloc settings (:mod:`.glibc_malloc`).
 
-#: The name of :func:`load_checkpoint_file` in earlier versions.
-load_weights_only = load_checkpoint_file
-
-__all__ = [
-    'CHECKPOINT_GLOBALS', 'CorruptFileError', 'INFO_GLOBALS',
-    'RefusedGlobalError', 'UnsafeCheckpointError', 'add_split_arguments',
-    'build_split_dataset', 'build_trained_model',
-    'install_checkpoint_loader', 'load_checkpoint_file', 'load_info_file',
-    'load_weights_only'
-]
+They import nothing else of the library; every other floor may use them.
+"""

@@ -1,9 +1,9 @@
 """glibc malloc settings that keep freed memory in the process.
 
-Shared by :class:`~projects.occ_common.hooks.CPUMallocTuningHook` (training
-and testing through a Runner) and the benchmark tools (``--keep-freed-
-memory``); see the hook's module for why and what it measured. A leaf
-module: ctypes only.
+Shared by :class:`~projects.occ_common.engine.hooks.CPUMallocTuningHook`
+(training and testing through a Runner) and the benchmark tools
+(``--keep-freed-memory``); see the hook's module for why and what it
+measured. A leaf module: ctypes only.
 """
 import ctypes
 import ctypes.util

@@ -7,7 +7,7 @@ composed picture :func:`render_occ_figure` / :func:`render_data_sample`;
 :class:`OccLocalVisualizer` is the configs' ``visualizer`` (mmdet3d's
 ``browse_dataset`` draws through it).
 The hook that draws them during testing is
-:class:`~projects.occ_common.hooks.OccVisualizationHook`.
+:class:`~projects.occ_common.engine.hooks.OccVisualizationHook`.
 """
 from .bev_view import render_bev, top_labels
 from .camera_overlay import overlay_on_cameras

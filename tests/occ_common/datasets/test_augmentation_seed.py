@@ -18,7 +18,7 @@ from torch.utils.data import DataLoader
 
 import projects.occ_common  # noqa: F401  (registers)
 from projects.occ_common.datasets.augmentation_seed import EpochSeed
-from projects.occ_common.hooks import AugmentationSeedHook
+from projects.occ_common.engine.hooks import AugmentationSeedHook
 from projects.occ_common.testing.tool_logs import REPO_ROOT
 
 register_all_modules(init_default_scope=True)

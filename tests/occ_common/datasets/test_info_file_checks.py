@@ -17,10 +17,10 @@ from mmengine.config import Config
 import projects.occ_common  # noqa: F401  (registers)
 from projects.occ_common.datasets.converters.nuscenes_occ_converter import \
     SYNTHETIC_MARKER
+from projects.occ_common.fileio import (CorruptFileError, RefusedGlobalError,
+                                        load_info_file)
 from projects.occ_common.testing.tiny_world import make_tiny_world
 from projects.occ_common.testing.tool_logs import run_create_data
-from projects.occ_common.utils import (CorruptFileError, RefusedGlobalError,
-                                       load_info_file)
 
 register_all_modules(init_default_scope=True)
 REPO = osp.dirname(osp.dirname(osp.dirname(osp.dirname(__file__))))

@@ -20,8 +20,8 @@ from mmdet3d.utils import register_all_modules
 from mmengine.config import Config
 
 import projects.occ_common  # noqa: F401  (registers)
-from projects.occ_common.datasets.synthetic import world_from_dict
-from projects.occ_common.testing.camera_classes import rendered_classes
+from projects.occ_common.synthetic import world_from_dict
+from projects.occ_common.synthetic.camera_classes import rendered_classes
 from projects.occ_common.testing.tiny_world import make_tiny_world
 
 register_all_modules(init_default_scope=True)

@@ -20,10 +20,10 @@ from mmengine.config import Config
 
 import projects.occ_common  # noqa: F401  (registers)
 from projects.occ_common.datasets.info_format import CAMERA_NAMES
+from projects.occ_common.fileio.safe_pickle import load_info_file
 from projects.occ_common.geometry.depth import (depth_bin_values,
                                                 depth_to_bins, patch_min_depth)
 from projects.occ_common.testing.tool_logs import run_create_data
-from projects.occ_common.utils.safe_pickle import load_info_file
 
 register_all_modules(init_default_scope=True)
 REPO = osp.dirname(osp.dirname(osp.dirname(osp.dirname(__file__))))

@@ -9,9 +9,9 @@ from projects.occ_common.geometry.depth import (depth_bin_values,
                                                 patch_min_depth,
                                                 project_nearest,
                                                 project_points)
-from projects.occ_common.testing.occ_inputs import (PATCH_DEPTH_BOUND,
-                                                    patch_depth_map,
-                                                    ring_camera_rig)
+from projects.occ_common.synthetic.occ_inputs import (PATCH_DEPTH_BOUND,
+                                                      patch_depth_map,
+                                                      ring_camera_rig)
 
 # Camera looking along +z of the working frame, f = 2, principal point
 # (2, 2), 4x4 image: u = 2 x / z + 2, v = 2 y / z + 2.

@@ -5,7 +5,7 @@ import torch
 from torch import nn
 
 from projects.occ_common.geometry.inverse import inverse_4x4, invert_matrix
-from projects.occ_common.testing.synthetic_batch import ring_rig
+from projects.occ_common.synthetic.synthetic_batch import ring_rig
 
 
 def test_hand_made_projective_matrix():

@@ -8,12 +8,12 @@ from mmdet3d.registry import MODELS
 from mmdet3d.utils import register_all_modules
 from mmengine.logging import MMLogger
 
+from projects.occ_common.fileio import UnsafeCheckpointError
 from projects.occ_common.models.pretrained import (PretrainedMismatchError,
                                                    check_entries,
                                                    load_pretrained,
                                                    resolve_checkpoint)
 from projects.occ_common.testing.imagenet_swin import official_swin_state
-from projects.occ_common.utils import UnsafeCheckpointError
 
 register_all_modules(init_default_scope=False)
 

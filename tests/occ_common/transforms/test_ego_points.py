@@ -5,12 +5,12 @@ import numpy as np
 import pytest
 from mmdet3d.structures import LiDARPoints
 
+from projects.occ_common.fileio.safe_pickle import load_info_file
 from projects.occ_common.transforms.ego_points import (NUSCENES_EGO_BOX,
                                                        RemoveEgoPoints,
                                                        in_ego_box)
 from projects.occ_common.transforms.points_loading import \
     LoadOccPointsFromMultiSweeps
-from projects.occ_common.utils.safe_pickle import load_info_file
 
 REAL = osp.join(
     osp.dirname(osp.dirname(osp.dirname(osp.dirname(osp.abspath(__file__))))),

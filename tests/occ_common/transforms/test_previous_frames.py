@@ -12,7 +12,7 @@ from mmdet3d.utils import register_all_modules
 import projects.occ_common  # noqa: F401  (registers)
 from projects.occ_common.datasets.converters.key_frame_links import \
     link_previous_key_frames
-from projects.occ_common.datasets.synthetic import world_from_dict
+from projects.occ_common.synthetic import world_from_dict
 from tests.occ_common.datasets.test_nuscenes_occ_dataset import \
     _static_surface_distance
 

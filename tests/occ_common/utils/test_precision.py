@@ -5,12 +5,12 @@ import pytest
 import torch
 import torch.nn.functional as F
 
+from projects.occ_common.analysis.real_sample import (MISSING_REASON,
+                                                      real_lidar2img,
+                                                      real_sample_dir)
 from projects.occ_common.models.layers.camera_geometry import (
     create_frustum, frustum_to_lidar)
 from projects.occ_common.testing.cuda_autocast import cuda_like_autocast
-from projects.occ_common.testing.real_sample import (MISSING_REASON,
-                                                     real_lidar2img,
-                                                     real_sample_dir)
 from projects.occ_common.utils.precision import float32_math
 
 

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from projects.occ_common.testing.occ_inputs import ring_camera_rig
+from projects.occ_common.synthetic.occ_inputs import ring_camera_rig
 from projects.occ_common.visualization import class_palette, overlay_on_cameras
 
 PALETTE = class_palette(('empty', 'car', 'road'))

@@ -5,7 +5,7 @@ import torch
 from mmengine.structures import BaseDataElement
 from PIL import Image
 
-from projects.occ_common.testing.occ_inputs import ring_camera_rig
+from projects.occ_common.synthetic.occ_inputs import ring_camera_rig
 from projects.occ_common.visualization import (camera_images,
                                                render_data_sample,
                                                render_occ_figure, save_png)

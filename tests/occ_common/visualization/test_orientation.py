@@ -8,7 +8,7 @@ import os.path as osp
 import numpy as np
 import pytest
 
-from projects.occ_common.utils.safe_pickle import load_info_file
+from projects.occ_common.fileio.safe_pickle import load_info_file
 from projects.occ_common.visualization import (class_palette,
                                                forward_from_lidar2ego,
                                                render_bev, render_voxels,

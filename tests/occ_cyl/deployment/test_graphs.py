@@ -12,9 +12,9 @@ import os.path as osp
 
 import pytest
 
+from projects.occ_common.analysis.real_sample import (MISSING_REASON,
+                                                      real_info_file)
 from projects.occ_common.deployment import graph_summary
-from projects.occ_common.testing.real_sample import (MISSING_REASON,
-                                                     real_info_file)
 from projects.occ_common.testing.tool_logs import REPO_ROOT, export_onnx_report
 from projects.occ_cyl.deployment.graphs import MIDDLE_OUTSIDE
 

@@ -20,12 +20,13 @@ from mmengine.config import Config
 from mmengine.registry import init_default_scope
 
 import projects.sdg_occ  # noqa: F401  (registers)
+from projects.occ_common.analysis.real_sample import (INFO_FILE,
+                                                      MISSING_REASON,
+                                                      real_sample_dir)
 from projects.occ_common.deployment import (config_time_dim, graph_summary,
                                             info_file_sample, logits_parity,
                                             onnx_session, reference_logits,
                                             run_graph, synthetic_sample)
-from projects.occ_common.testing.real_sample import (INFO_FILE, MISSING_REASON,
-                                                     real_sample_dir)
 from projects.occ_common.testing.tool_logs import REPO_ROOT, load_tool
 from projects.sdg_occ.deployment import sdg_graph_spec
 

@@ -12,8 +12,8 @@ import os.path as osp
 
 import pytest
 
-from projects.occ_common.testing.real_sample import (MISSING_REASON,
-                                                     real_info_file)
+from projects.occ_common.analysis.real_sample import (MISSING_REASON,
+                                                      real_info_file)
 from projects.occ_common.testing.tool_logs import REPO_ROOT, export_onnx_report
 from projects.sdg_occ.deployment.graph_spec import FUSION_OUTSIDE
 

@@ -30,7 +30,7 @@ from typing import Dict, Optional, Tuple
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
-from ...utils.safe_pickle import load_info_file
+from ...fileio.safe_pickle import load_info_file
 from ..info_format import CAMERA_NAMES, weather_flags
 from .key_frame_links import link_previous_key_frames
 from .label_files import label_roots, occ_label_paths

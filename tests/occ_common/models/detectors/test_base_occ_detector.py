@@ -6,7 +6,7 @@ from mmdet3d.utils import register_all_modules
 
 import projects.occ_common  # noqa: F401 (registers the losses)
 from projects.occ_common.models.detectors import BaseOccDetector
-from projects.occ_common.testing.occ_inputs import make_occ_batch
+from projects.occ_common.synthetic.occ_inputs import make_occ_batch
 
 register_all_modules(init_default_scope=False)
 

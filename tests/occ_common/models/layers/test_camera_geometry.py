@@ -11,7 +11,7 @@ from projects.occ_common.models.layers import (POSITION_EMBED_DIMS,
                                                cylindrical_position_embedding,
                                                frustum_to_lidar,
                                                lidar2img_matrix)
-from projects.occ_common.testing.occ_inputs import ring_camera_rig
+from projects.occ_common.synthetic.occ_inputs import ring_camera_rig
 
 
 def test_frustum_cell_centres():

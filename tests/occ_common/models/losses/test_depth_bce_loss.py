@@ -5,8 +5,8 @@ import pytest
 import torch
 
 from projects.occ_common.models.losses import DepthBCELoss
-from projects.occ_common.testing.occ_inputs import (PATCH_DEPTH_BOUND,
-                                                    patch_depth_map)
+from projects.occ_common.synthetic.occ_inputs import (PATCH_DEPTH_BOUND,
+                                                      patch_depth_map)
 
 BOUND = PATCH_DEPTH_BOUND  # 4 bins of 1 m from 1 m
 

@@ -53,7 +53,7 @@ def test_two_syncs_whatever_the_kernel():
     27 counts (the loop made 26 boolean-mask selections)."""
     from torch import nn
 
-    from projects.occ_common.utils.op_counting import OpCounter
+    from projects.occ_common.analysis.op_counting import OpCounter
 
     class _Build(nn.Module):
 
