@@ -43,11 +43,12 @@ import sys
 import tempfile
 
 import torch
-from mmdet3d.registry import MODELS, VISUALIZERS
+from mmdet3d.registry import VISUALIZERS
 from mmengine.config import Config
 from mmengine.dataset import pseudo_collate
 from mmengine.registry import init_default_scope
 
+from projects.occ_common.apis import init_model
 from projects.occ_common.apis.unlabelled_pipeline import \
     unlabelled_test_dataset
 from projects.occ_common.datasets.single_sample import (SampleInfo,
@@ -56,8 +57,7 @@ from projects.occ_common.engine.config_checks import (CfgOptionsAction,
                                                       apply_cfg_options)
 from projects.occ_common.evaluation.occupancy_export import \
     write_occ3d_prediction
-from projects.occ_common.fileio.safe_pickle import (RefusedGlobalError,
-                                                    load_checkpoint_file)
+from projects.occ_common.fileio.safe_pickle import RefusedGlobalError
 
 
 def parse_args(argv=None):
@@ -109,37 +109,6 @@ def load_config(args) -> Config:
     return cfg
 
 
-def init_model(cfg: Config, checkpoint: str, device: str) -> torch.nn.Module:
-    """The config's model with the checkpoint's weights, in eval mode.
-
-    mmdet3d's ``init_model``, with the checks of ``tools/test.py``
-    (:class:`~projects.occ_common.engine.hooks.CheckpointMatchHook`).
-
-    Args:
-        cfg (Config): The config.
-        checkpoint (str): A Runner checkpoint or a bare state dict.
-        device (str): Where the model goes.
-
-    Returns:
-        nn.Module: The model on ``device``.
-
-    Raises:
-        FileNotFoundError: The checkpoint does not exist.
-        ValueError: It is corrupt, holds non-finite weights, or its keys
-            or shapes differ from the model's.
-        RefusedGlobalError: It pickles code (nothing of it was run).
-    """
-    from projects.occ_common.engine.hooks.checkpoint_match_hook import \
-        load_checked_weights
-    if device.startswith('cuda') and not torch.cuda.is_available():
-        raise ValueError(f'--device {device}: CUDA is not available here; '
-                         'use --device cpu')
-    loaded = load_checkpoint_file(checkpoint, map_location='cpu')
-    model = MODELS.build(cfg.model)
-    load_checked_weights(model, loaded, checkpoint, cfg.filename)
-    return model.to(device).eval()
-
-
 def check_sample_files(dataset, sample: SampleInfo, info_file: str) -> None:
     """Refuse a sample whose key frame or camera image is missing.
 
@@ -161,7 +130,8 @@ def inference_occupancy(model, dataset, index: int):
     """Run the sample through the pipeline and the model.
 
     Args:
-        model (nn.Module): From :func:`init_model`.
+        model (nn.Module): From
+            :func:`~projects.occ_common.apis.init_model`.
         dataset (BaseDataset): From
             :func:`~projects.occ_common.apis.unlabelled_pipeline.unlabelled_test_dataset`.
         index (int): The sample's index.

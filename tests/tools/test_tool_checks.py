@@ -229,6 +229,48 @@ def test_checkpoint_of_another_model_is_refused(toy_checkpoint, tmp_path):
               '--allow-key-mismatch')
 
 
+def _load_with_benchmark(path):
+    tool = load_tool('tools/analysis_tools/benchmark.py')
+    return tool.Subject(CONFIG, path,
+                        tool.parse_args([CONFIG, '--device', 'cpu']))
+
+
+def _load_with_exporter(path):
+    from mmengine.config import Config
+    return load_tool('tools/deployment/export_onnx.py').load_model(
+        Config.fromfile(CONFIG), path)
+
+
+def _load_with_init_model(path):
+    from projects.occ_common.apis import init_model
+    return init_model(CONFIG, path)
+
+
+@pytest.mark.parametrize(
+    'load', [_load_with_benchmark, _load_with_exporter,
+             _load_with_init_model],
+    ids=['benchmark', 'export_onnx', 'init_model'])
+def test_every_loader_refuses_another_model(load, toy_checkpoint, tmp_path):
+    """The tools that load a trained model themselves go through one
+    checked path (``projects.occ_common.apis.init_model``, which the demo,
+    visualize_occ.py and depth_accuracy.py call too): a checkpoint with a
+    renamed key is refused naming the file. Before, benchmark.py timed it
+    with the renamed tensor left random, exit 0."""
+
+    def renamed(state):
+        state['head.weight'] = state.pop('classifier.weight')
+
+    path = _modified(toy_checkpoint, tmp_path, renamed)
+    with pytest.raises(ValueError, match=re.escape(
+            f'{path} does not fit the model of {CONFIG}')):
+        load(path)
+    model = load(toy_checkpoint)
+    model = getattr(model, 'model', model)
+    state = load_checkpoint_file(toy_checkpoint)['state_dict']
+    assert torch.equal(model.state_dict()['classifier.weight'],
+                       state['classifier.weight'])
+
+
 def test_nan_weights_are_refused_even_when_allowed(toy_checkpoint,
                                                    tmp_path):
     """An all-NaN checkpoint evaluated with rc 0 before."""

@@ -202,19 +202,13 @@ class Subject:
     """
 
     def __init__(self, config: str, checkpoint: Optional[str], args) -> None:
-        from mmengine.registry import MODELS
-        from mmengine.runner import load_checkpoint
+        from projects.occ_common.apis import init_model
         cfg = load_config(config, args.cfg_options)
         self.config, self.checkpoint = config, checkpoint
         self.device = torch.device(args.device)
-        self.model = MODELS.build(cfg.model)
-        if checkpoint:
-            # The config's plugin provides the restricted loader; nothing
-            # is installed on import.
-            from projects.occ_common.fileio import install_checkpoint_loader
-            install_checkpoint_loader()
-            load_checkpoint(self.model, checkpoint, map_location='cpu')
-        self.model.to(self.device)
+        # Checked as tools/test.py checks: a checkpoint of another model
+        # is refused instead of timing random weights.
+        self.model = init_model(cfg, checkpoint or None, args.device)
         self.train = args.train
         self.optim_wrapper = None
         if self.train:

@@ -54,12 +54,12 @@ def build(args):
         tuple: ``(model, dataset)``, the model in eval mode on
         ``args.device``.
     """
-    from projects.occ_common.apis import build_trained_model
+    from projects.occ_common.apis import init_model
 
-    cfg, model = build_trained_model(
-        args.config, args.checkpoint, args.cfg_options, args.device,
+    model = init_model(
+        args.config, args.checkpoint, args.device, args.cfg_options,
         allow_key_mismatch=getattr(args, 'allow_key_mismatch', False))
-    return model, build_split_dataset(cfg, args.split, args.data_root)
+    return model, build_split_dataset(model.cfg, args.split, args.data_root)
 
 
 def measure(model, dataset, max_samples: Optional[int] = None

@@ -148,20 +148,9 @@ def load_model(cfg, checkpoint: str) -> torch.nn.Module:
         ValueError: Its keys or shapes differ from the model's, or it
             holds non-finite weights.
     """
-    from mmdet3d.registry import MODELS
-
-    from projects.occ_common.engine.hooks.checkpoint_match_hook import \
-        load_checked_weights
-    from projects.occ_common.fileio.safe_pickle import load_checkpoint_file
-    torch.manual_seed(0)
-    model = MODELS.build(cfg.model)
-    if checkpoint != 'none':
-        if not osp.isfile(checkpoint):
-            raise FileNotFoundError(f'checkpoint not found: {checkpoint}')
-        load_checked_weights(
-            model, load_checkpoint_file(checkpoint, map_location='cpu'),
-            checkpoint, cfg.filename)
-    return model.eval()
+    from projects.occ_common.apis import init_model
+    torch.manual_seed(0)  # 'none': the same random weights every time
+    return init_model(cfg, None if checkpoint == 'none' else checkpoint)
 
 
 def graph_specs(model, cfg, bev_output: bool = False) -> list:

@@ -221,11 +221,13 @@ def predict_sample(args):
     from mmengine.dataset import pseudo_collate
     from mmengine.registry import DATASETS
 
-    from projects.occ_common.apis import build_trained_model
+    from projects.occ_common.apis import init_model
 
-    cfg, model = build_trained_model(
-        args.config, args.checkpoint, args.cfg_options, args.device,
-        getattr(args, 'cfg_options_raw', None), args.allow_key_mismatch)
+    model = init_model(args.config, args.checkpoint, args.device,
+                       args.cfg_options,
+                       getattr(args, 'cfg_options_raw', None),
+                       args.allow_key_mismatch)
+    cfg = model.cfg
     dataset = DATASETS.build(cfg.test_dataloader.dataset)
     if not 0 <= args.index < len(dataset):
         raise ValueError(f'--index {args.index} is outside the test set of '

@@ -1,7 +1,7 @@
 """Entry points for tools and users: a config's model with checked trained
 weights (:func:`init_model`) and the samples of a split through a config's
 test pipeline."""
-from .inference import build_trained_model
+from .inference import init_model
 from .split_dataset import add_split_arguments, build_split_dataset
 
-__all__ = ['add_split_arguments', 'build_split_dataset', 'build_trained_model']
+__all__ = ['add_split_arguments', 'build_split_dataset', 'init_model']

@@ -14,13 +14,10 @@ mmengine does and reads it with
 :func:`~.safe_pickle.load_checkpoint_stream` for a download in memory).
 """
 import io
-import os
 import os.path as osp
 from tempfile import TemporaryDirectory
-from urllib.parse import urlparse
 
-import torch
-
+from .hub_cache import cached_download, torchvision_url
 from .safe_pickle import load_checkpoint_file, load_checkpoint_stream
 
 
@@ -30,37 +27,18 @@ def _load_from_local(filename: str, map_location=None):
 
 
 def _load_from_http(filename: str, map_location=None, model_dir=None):
-    """Scheme ``http(s)://``.
-
-    Downloads into torch hub's cache as mmengine does (rank 0 first), then
-    loads the file like a local one; a file already there is not fetched
-    again (so one copied there by hand works offline).
-    """
-    from mmengine.dist import barrier, get_dist_info
-    rank, world_size = get_dist_info()
-    folder = model_dir or osp.join(torch.hub.get_dir(), 'checkpoints')
-    cached = osp.join(folder, osp.basename(urlparse(filename).path))
-
-    def download():
-        if not osp.isfile(cached):
-            os.makedirs(folder, exist_ok=True)
-            torch.hub.download_url_to_file(filename, cached, progress=False)
-
-    if rank == 0:
-        download()
-    if world_size > 1:
-        barrier()
-        if rank > 0:
-            download()
-    return load_checkpoint_file(cached, map_location)
+    """Scheme ``http(s)://``: into torch hub's cache as mmengine does
+    (:func:`~.hub_cache.cached_download`), then as a local file."""
+    return load_checkpoint_file(cached_download(filename, model_dir),
+                                map_location)
 
 
 def _load_from_torchvision(filename: str, map_location=None):
-    """Schemes ``torchvision://NAME`` and ``modelzoo://NAME``: the URL
-    mmengine finds for NAME (it needs torchvision), then as ``https://``."""
-    from mmengine.runner.checkpoint import get_torchvision_models
-    name = filename.split('://', 1)[1]
-    return _load_from_http(get_torchvision_models()[name], map_location)
+    """Schemes ``torchvision://NAME`` and ``modelzoo://NAME``: the URL of
+    NAME (:func:`~.hub_cache.torchvision_url`), then as ``https://``."""
+    return load_checkpoint_file(
+        cached_download(torchvision_url(filename), name=filename),
+        map_location)
 
 
 def _load_from_openmmlab(filename: str, map_location=None):

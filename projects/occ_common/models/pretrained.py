@@ -48,24 +48,17 @@ Here instead:
   containers only, nothing in the file can run.
 """
 import logging
-import os
 import os.path as osp
 import re
 from typing import Dict, List, Mapping, Optional, Tuple
 
-import torch
 from mmengine.logging import print_log
 from torch import Tensor, nn
 
+from ..fileio.hub_cache import cached_download, torchvision_url
 from ..fileio.safe_pickle import load_checkpoint_file
-
-#: torchvision's ImageNet weights (``IMAGENET1K_V1``, the file mmengine's
-#: ``torchvision://NAME`` resolves to), fetched without torchvision.
-TORCHVISION_URLS = {
-    'resnet18': 'https://download.pytorch.org/models/resnet18-f37072fd.pth',
-    'resnet34': 'https://download.pytorch.org/models/resnet34-b627a593.pth',
-    'resnet50': 'https://download.pytorch.org/models/resnet50-0676ba61.pth',
-}
+from ..fileio.state_dict import compare_state_dicts as _compare
+from ..fileio.state_dict import unwrap_state_dict
 
 #: The data preprocessor's normalisation each ResNet style's weights were
 #: trained with (mmdet's conventions; images are loaded as BGR).
@@ -155,33 +148,10 @@ def resolve_checkpoint(checkpoint: str) -> str:
             put the file instead.
     """
     if checkpoint.startswith('torchvision://'):
-        name = checkpoint[len('torchvision://'):]
-        if name not in TORCHVISION_URLS:
-            raise ValueError(f'{checkpoint}: unknown torchvision model; '
-                             f'known: {sorted(TORCHVISION_URLS)} (or give '
-                             'the path of a downloaded file)')
-        url = TORCHVISION_URLS[name]
-    elif checkpoint.startswith(('http://', 'https://')):
-        url = checkpoint
-    else:
-        return osp.expanduser(checkpoint)
-    cache = osp.join(torch.hub.get_dir(), 'checkpoints')
-    path = osp.join(cache, osp.basename(url))
-    if osp.isfile(path):
-        return path
-    # torchvision names its files <name>-<sha256 prefix>.pth.
-    digest = re.search(r'-([0-9a-f]{8,})\.', osp.basename(url))
-    os.makedirs(cache, exist_ok=True)
-    print_log(f'downloading {url} to {path}', logger='current')
-    try:
-        torch.hub.download_url_to_file(
-            url, path, hash_prefix=digest.group(1) if digest else None)
-    except Exception as err:  # noqa: BLE001 - re-raised with the remedy
-        raise RuntimeError(
-            f'could not download {checkpoint} ({url}): {err}. Download it '
-            f'elsewhere and copy it to {path}, or point the pretrained '
-            'entry\'s checkpoint at a local file') from err
-    return path
+        return cached_download(torchvision_url(checkpoint), name=checkpoint)
+    if checkpoint.startswith(('http://', 'https://')):
+        return cached_download(checkpoint)
+    return osp.expanduser(checkpoint)
 
 
 def checkpoint_state_dict(path: str,
@@ -196,38 +166,18 @@ def checkpoint_state_dict(path: str,
     Returns:
         dict[str, Tensor]: Key -> tensor.
     """
-    ckpt = load_checkpoint_file(path, map_location='cpu')
-    for key in ('state_dict', 'model'):
-        if isinstance(ckpt, Mapping) and isinstance(ckpt.get(key), Mapping):
-            ckpt = ckpt[key]
-            break
-    state = {
-        (k[len('module.'):] if k.startswith('module.') else k): v
-        for k, v in ckpt.items() if isinstance(v, Tensor)
-    }
-    if prefix:
-        kept = {k[len(prefix):]: v for k, v in state.items()
-                if k.startswith(prefix)}
-        if not kept:
-            raise PretrainedMismatchError(
-                f'checkpoint {path} has no key starting with {prefix!r}; its '
-                f'keys start like {sorted(state)[:_SHOWN]}')
-        state = kept
-    return state
+    try:
+        state = unwrap_state_dict(
+            load_checkpoint_file(path, map_location='cpu'), path, prefix)
+    except ValueError as err:
+        raise PretrainedMismatchError(str(err)) from None
+    return {k: v for k, v in state.items() if isinstance(v, Tensor)}
 
 
 def _is_swin(module: nn.Module) -> bool:
     """An mmdet Swin, or a subclass such as RecomputedSwinTransformer."""
     from mmdet.models.backbones import SwinTransformer
     return isinstance(module, SwinTransformer)
-
-
-def _matches(key: str, patterns) -> bool:
-    return any(p.search(key) for p in patterns)
-
-
-def _counter(key: str) -> bool:
-    return key.endswith('num_batches_tracked')
 
 
 def _prefix_hint(unexpected: List[str], own: Mapping) -> str:
@@ -258,28 +208,7 @@ def compare_state_dicts(own: Mapping[str, Tensor],
         ``unexpected``, ``missing`` and ``shape`` (``key``, checkpoint
         shape, module shape).
     """
-    report = dict(ignored=[], allowed_missing=[], unexpected=[], missing=[],
-                  shape=[])
-    load = {}
-    for key, value in theirs.items():
-        if _matches(key, entry['ignore']):
-            report['ignored'].append(key)
-        elif key not in own:
-            if not _counter(key):
-                report['unexpected'].append(key)
-        elif tuple(value.shape) != tuple(own[key].shape):
-            report['shape'].append(
-                (key, tuple(value.shape), tuple(own[key].shape)))
-        else:
-            load[key] = value
-    for key in own:
-        if key in theirs or _counter(key):
-            continue
-        if _matches(key, entry['allow_missing']):
-            report['allowed_missing'].append(key)
-        elif not _matches(key, entry['ignore']):
-            report['missing'].append(key)
-    return load, report
+    return _compare(own, theirs, entry['ignore'], entry['allow_missing'])
 
 
 def check_style(module: nn.Module, name: str, style: Optional[str],

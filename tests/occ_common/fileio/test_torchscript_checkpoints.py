@@ -130,8 +130,8 @@ def test_pretrained_entry_from_the_hub_cache(payload, tmp_path,
                                              monkeypatch):
     """model.pretrained.<part>.checkpoint='torchvision://resnet50' (the
     configs' own), the file already in torch hub's cache."""
-    from projects.occ_common.models.pretrained import (TORCHVISION_URLS,
-                                                       check_entries,
+    from projects.occ_common.fileio.hub_cache import TORCHVISION_URLS
+    from projects.occ_common.models.pretrained import (check_entries,
                                                        load_pretrained)
     monkeypatch.setattr(torch.hub, '_hub_dir', str(tmp_path))
     (tmp_path / 'checkpoints').mkdir()

@@ -241,7 +241,7 @@ def test_torchvision_name_resolves_through_the_hub_cache(tmp_path,
     load_pretrained(net, 'img', _entry(checkpoint='torchvision://resnet18',
                                        ignore=[r'^fc\.']))
 
-    def offline(url, dst, hash_prefix=None):
+    def offline(url, dst, hash_prefix=None, progress=True):
         raise OSError('no network')
 
     monkeypatch.setattr(torch.hub, 'download_url_to_file', offline)
