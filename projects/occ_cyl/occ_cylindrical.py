@@ -226,11 +226,25 @@ class OccCylindrical(BaseOccDetector):
             input_shape, [_img_shape(s) for s in batch_data_samples])
         planes = self.tpv_fusion(depth, context, cam_points, lidar_feats,
                                  [p[:, :3] for p in points])
-        logits = self.occ_head(self.tpv_encoder(planes))
-        result = dict(logits=logits, depth=depth)
+        result = dict(logits=self.decode(planes), depth=depth)
         if 'seg_logits' in out:
             result['seg_logits'] = out['seg_logits']
         return result
+
+    def decode(self, planes: Sequence[Tensor]) -> List[Tensor]:
+        """TPV plane encoder and head: the fused planes' occupancy logits
+        per scale (steps 5-6), on tensors (shared with the ONNX plane
+        graph).
+
+        Args:
+            planes (Sequence[Tensor]): The fused TPV planes (R, Theta),
+                (Theta, Z), (R, Z), each Shape (B, C, H_k, W_k).
+
+        Returns:
+            list[Tensor]: Logits per scale, finest first, each
+            Shape (B, K, X_l, Y_l, Z_l).
+        """
+        return self.occ_head(self.tpv_encoder(planes))
 
     def _inside(self, points: Tensor) -> Tensor:
         """Keep the points that reach a voxel (all finite ones when the

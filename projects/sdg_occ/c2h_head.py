@@ -9,7 +9,7 @@ Channel order (FlashOcc's ``BEVOCCHead2D``, whose predictor output is viewed
 as ``(..., Dz, num_classes)``): channel ``c = z * num_classes + cls``, i.e.
 the class index varies fastest.
 """
-from typing import Dict, List, Optional
+from typing import Dict, List, Optional, Tuple
 
 from mmdet3d.registry import MODELS
 from mmengine.model import BaseModule
@@ -178,6 +178,29 @@ class ChannelToHeightHead(BaseModule):
                              f'got {tuple(gt_occ.shape)}')
         return self.loss_occ(logits, gt_occ.long(), suffix)
 
+    def decode(self, x: Tensor, with_logits: bool = True
+               ) -> Tuple[Optional[Tensor], Tensor]:
+        """Logits and labels of a BEV map from one pass of the head.
+
+        The labels come from the contiguous class axis of the raw output
+        (an argmax over the permuted logits costs ~3x more), the logits
+        only when asked for.
+
+        Args:
+            x (Tensor): BEV features. Shape (B, C, Y, X).
+            with_logits (bool): Also return the logits. Defaults to True.
+
+        Returns:
+            tuple: Logits (B, num_classes, X, Y, Z), or None without
+            ``with_logits``, and labels, long (B, X, Y, Z).
+        """
+        raw = self.predictor(self.convs(x))
+        labels = height_labels_to_xyz(raw, self.num_classes, self.dz)
+        if not with_logits:
+            return None, labels
+        return height_logits_to_xyz(
+            channels_to_height(raw, self.num_classes, self.dz)), labels
+
     def predict(self, x: Tensor) -> Tensor:
         """Most likely class of every voxel.
 
@@ -187,5 +210,4 @@ class ChannelToHeightHead(BaseModule):
         Returns:
             Tensor: Labels, long. Shape (B, X, Y, Z).
         """
-        return height_labels_to_xyz(
-            self.predictor(self.convs(x)), self.num_classes, self.dz)
+        return self.decode(x, with_logits=False)[1]

@@ -6,23 +6,32 @@ semantics), the SDG view transformation into a camera BEV, an SPVCNN LiDAR
 BEV, neighbourhood-attention fusion, the BEV encoder and the
 channel-to-height occupancy head.
 
-* ``variant='fusion'`` (SDG-Fusion, Fig. 5a): the camera BEV is the source
+The variant is what the configured sub-modules make of it
+(:attr:`SDGOcc.variant`), not a separate switch:
+
+* a ``lidar_encoder`` and a ``fusion`` without ``loss_distill``:
+  SDG-Fusion (Fig. 5a): the camera BEV is the source
   (queries) of the fusion and the LiDAR BEV the cross feature (keys,
   values), Sec. 3.5; the fused BEV goes to the head, in training and
   inference.
-* ``variant='kl'`` (SDG-KL, Fig. 5b): in training a LiDAR-dominant fusion
+* with a ``loss_distill`` too: SDG-KL (Fig. 5b): in training a
+  LiDAR-dominant fusion
   (LiDAR queries, camera keys and values) is a teacher, supervised by the
   occupancy loss, and FOAD distils it into the camera BEV, which is also
   supervised; at inference the LiDAR encoder and the fusion are skipped
   and the camera BEV goes to the head. The teacher decodes its fused BEV
   with the student's BEV encoder and head, or (``separate_teacher_head``,
   as the configs do) with its own training-only copies.
-* ``variant='camera'`` (the Baseline and "+SDG" rows of Table 3): no LiDAR
-  encoder, no fusion; the camera BEV goes to the head. With the plain LSS
+* neither: the camera rows (the Baseline and "+SDG" rows of Table 3): no
+  LiDAR encoder, no fusion; the camera BEV goes to the head. With the plain LSS
   lift this is the FlashOcc-like baseline, which needs no LiDAR points at
   all; with the SDG lift the points still guide the view transform.
 
-The camera BEV is one step, :meth:`SDGOcc.extract_camera_bev`: the view
+The camera BEV is one step, :meth:`SDGOcc.extract_camera_bev`, whose
+per-frame core (:meth:`SDGOcc.camera_bev`) and decoder
+(:meth:`SDGOcc.decode`) take plain tensors, so that the ONNX graphs
+(:mod:`.deployment`) call the model's own inference instead of restating
+it. The view
 transform pools the lifted features, then a learned 3x3 conv-BN
 (``camera_bev_conv``) gives the BEV that the fusion, the head and FOAD see.
 With ``num_frames`` T > 1 (the T-frame input of Sec. 3.1) that step also
@@ -37,11 +46,39 @@ from mmdet3d.registry import MODELS
 from torch import Tensor, nn
 
 from projects.occ_common.models.detectors import BaseOccDetector
-from .c2h_head import height_logits_to_xyz
 from .temporal_fusion import (FrameBEVCache, TemporalBEVFusion, frame_points,
                               frame_samples)
 
 _VARIANTS = ('camera', 'fusion', 'kl')
+
+
+def configured_variant(lidar_encoder: Optional[dict], fusion: Optional[dict],
+                       loss_distill: Optional[dict]) -> str:
+    """The variant the configured sub-modules make.
+
+    Args:
+        lidar_encoder, fusion, loss_distill (dict, optional): The
+            detector's arguments of those names.
+
+    Returns:
+        str: ``'camera'`` without a fusion, ``'kl'`` with a distillation
+        loss, else ``'fusion'``.
+
+    Raises:
+        ValueError: For a combination that is none of them (a LiDAR
+            encoder without a fusion or the other way round, or a
+            distillation loss without both).
+    """
+    if not (lidar_encoder or fusion):
+        if loss_distill:
+            raise ValueError('SDGOcc: loss_distill (SDG-KL) needs a '
+                             'lidar_encoder and a fusion (its teacher)')
+        return 'camera'
+    if not (lidar_encoder and fusion):
+        raise ValueError('SDGOcc: a LiDAR branch needs both a lidar_encoder '
+                         'and a fusion; set both, or both to None for the '
+                         'camera rows')
+    return 'kl' if loss_distill else 'fusion'
 
 
 @MODELS.register_module()
@@ -72,18 +109,20 @@ class SDGOcc(BaseOccDetector):
         num_classes (int): Occupancy classes, empty included.
         depth_bound (Sequence[float]): ``(min, max, step)`` of the depth
             bins, metres.
-        variant (str): ``'camera'``, ``'fusion'`` or ``'kl'``.
-            Defaults to 'fusion'.
+        variant (str, optional): Configs written before the variant was
+            read off the sub-modules name it (``'camera'``, ``'fusion'``
+            or ``'kl'``); it must then agree with them
+            (:func:`configured_variant`). Defaults to None.
         lidar_encoder (dict, optional): ``SPVCNNEncoder``, its BEV on the
-            camera BEV grid; required by ``'fusion'`` and ``'kl'``, refused
-            by ``'camera'``. Defaults to None.
-        fusion (dict, optional): ``NeighborhoodFusion``; same variants as
-            ``lidar_encoder``. The detector gives it its widths: for
-            ``'fusion'`` the camera BEV is the source and the LiDAR BEV the
-            cross feature, for ``'kl'`` the other way round, and the output
-            has the camera BEV's width. Defaults to None.
-        loss_distill (dict, optional): ``FOADDistillLoss``; required for
-            ``'kl'``.
+            camera BEV grid; with ``fusion``, SDG-Fusion or (with
+            ``loss_distill``) SDG-KL. Defaults to None.
+        fusion (dict, optional): ``NeighborhoodFusion``. The detector
+            gives it its widths: for SDG-Fusion the camera BEV is the
+            source and the LiDAR BEV the cross feature, for SDG-KL's
+            teacher the other way round, and the output has the camera
+            BEV's width. Defaults to None.
+        loss_distill (dict, optional): ``FOADDistillLoss``: makes the model
+            SDG-KL. Defaults to None.
         loss_depth (dict, optional): ``DepthBCELoss``. Defaults to None.
         loss_seg (dict, optional): 2D semantic loss on (N, C) logits, e.g.
             ``mmdet.CrossEntropyLoss`` with ``ignore_index=255``.
@@ -138,7 +177,7 @@ class SDGOcc(BaseOccDetector):
                  voxel_size: Sequence[float],
                  num_classes: int,
                  depth_bound: Sequence[float],
-                 variant: str = 'fusion',
+                 variant: Optional[str] = None,
                  lidar_encoder: Optional[dict] = None,
                  fusion: Optional[dict] = None,
                  loss_distill: Optional[dict] = None,
@@ -162,8 +201,9 @@ class SDGOcc(BaseOccDetector):
             loss_seg=loss_seg,
             seg_empty_label=seg_empty_label,
             **kwargs)
-        self._check_variant(variant, lidar_encoder, fusion, loss_distill)
-        self.variant = variant
+        self._variant = self._check_variant(variant, lidar_encoder, fusion,
+                                            loss_distill)
+        variant = self._variant
         self.downsample = int(downsample)
         self.teacher_loss_weight = float(teacher_loss_weight)
         bev_shape = (self.occ_shape[1], self.occ_shape[0])  # (Y, X)
@@ -243,24 +283,26 @@ class SDGOcc(BaseOccDetector):
             ignore_index=self.ignore_index)
 
     @staticmethod
-    def _check_variant(variant, lidar_encoder, fusion, loss_distill) -> None:
-        """Refuse a variant configured with the wrong branches."""
-        if variant not in _VARIANTS:
+    def _check_variant(variant: Optional[str], lidar_encoder, fusion,
+                       loss_distill) -> str:
+        """The configured variant; a named one must agree with it."""
+        found = configured_variant(lidar_encoder, fusion, loss_distill)
+        if variant is not None and variant not in _VARIANTS:
             raise ValueError(f'SDGOcc variant must be one of {_VARIANTS}, '
                              f'got {variant!r}')
-        if variant == 'camera':
-            if lidar_encoder or fusion or loss_distill:
-                raise ValueError(
-                    "SDGOcc(variant='camera') has no LiDAR branch: set "
-                    'lidar_encoder, fusion and loss_distill to None')
-        elif not (lidar_encoder and fusion):
-            raise ValueError(f'SDGOcc(variant={variant!r}) needs a '
-                             'lidar_encoder and a fusion')
-        if variant == 'kl' and not loss_distill:
-            raise ValueError("SDGOcc(variant='kl') needs a loss_distill")
-        if variant == 'fusion' and loss_distill:
-            raise ValueError("SDGOcc(variant='fusion') does not distil; set "
-                             'loss_distill to None')
+        if variant not in (None, found):
+            raise ValueError(
+                f'SDGOcc(variant={variant!r}) contradicts its sub-modules, '
+                f'which make {found!r} (lidar_encoder and fusion: a LiDAR '
+                'branch; loss_distill: SDG-KL). Drop variant; the '
+                'sub-modules say it.')
+        return found
+
+    @property
+    def variant(self) -> str:
+        """``'camera'``, ``'fusion'`` or ``'kl'``, read off the
+        sub-modules (:func:`configured_variant`)."""
+        return self._variant
 
     def _fusion_channels(self, cam_channels: int) -> Dict[str, int]:
         """Widths of the fusion: its source (query) is the camera BEV for
@@ -301,9 +343,46 @@ class SDGOcc(BaseOccDetector):
                              f'images {tuple(imgs.shape)}')
         return feats
 
-    def lift_camera_bev(self, inputs: dict, data_samples: Sequence
-                        ) -> Tuple[Dict[str, Tensor], Dict[str, Tensor]]:
-        """DepthNet outputs and the pooled camera BEV of the view transform.
+    def camera_bev(self, imgs: Tensor, lidar2img: Tensor,
+                   cam_params: Optional[Tensor],
+                   points: Optional[List[Tensor]],
+                   time_dims: Optional[List[Optional[int]]] = None
+                   ) -> Tuple[Dict[str, Tensor], Dict[str, Tensor]]:
+        """DepthNet outputs and the camera BEV F_bev^C of one frame, on
+        tensors: the core that :meth:`frame_camera_bev` and the ONNX graphs
+        share.
+
+        Args:
+            imgs (Tensor): Normalised images. Shape (B, N, 3, H, W).
+            lidar2img (Tensor): Shape (B, N, 4, 4).
+            cam_params (Tensor, optional): BEVDepth's camera parameters,
+                when the DepthNet reads them. Shape (B * N, P).
+            points (list[Tensor], optional): Per sample (P_b, C), for the
+                SDG lift (ignored by the plain LSS lift).
+            time_dims (list, optional): Per sample, the points' time-lag
+                column (None: every row is the key frame).
+
+        Returns:
+            tuple[dict, dict]: The DepthNet outputs and the view-transform
+            outputs with ``bev`` (B, C, Y, X) after ``camera_bev_conv`` and
+            ``bev_pooled``, the view transform's own; ``bev_mask`` (B, 1,
+            Y, X) stays the pooled coverage (FOAD's M_img).
+        """
+        feats = self.extract_img_feat(imgs)
+        depth_out = self.depth_net(feats, cam_params=cam_params)
+        use_sdg = self.view_transform.use_sdg
+        cam = self.view_transform(depth_out['context'], depth_out['depth'],
+                                  depth_out.get('seg_logits'),
+                                  points if use_sdg else None, lidar2img,
+                                  imgs.shape[-2:],
+                                  time_dims if use_sdg else None)
+        cam['bev_pooled'] = cam['bev']
+        cam['bev'] = self.camera_bev_conv(cam['bev'])
+        return depth_out, cam
+
+    def frame_camera_bev(self, inputs: dict, data_samples: Sequence
+                         ) -> Tuple[Dict[str, Tensor], Dict[str, Tensor]]:
+        """DepthNet outputs and the camera BEV F_bev^C of one frame.
 
         Args:
             inputs (dict): ``imgs`` (B, N, 3, H, W) and, when the SDG lift
@@ -313,16 +392,16 @@ class SDGOcc(BaseOccDetector):
                 sweeps were merged).
 
         Returns:
-            tuple[dict, dict]: The DepthNet outputs and the view-transform
-            outputs (``bev`` pooled, ``bev_mask``, ...).
+            tuple[dict, dict]: As :meth:`camera_bev`.
         """
         imgs = inputs['imgs']
-        feats = self.extract_img_feat(imgs)
+        if imgs.dim() != 5:
+            raise ValueError('SDGOcc expects inputs["imgs"] of shape (B, N, '
+                             f'3, H, W), got {tuple(imgs.shape)}')
         device = imgs.device
         cam_params = None
         if getattr(self.depth_net, 'camera_param_dims', 0) > 0:
             cam_params = self.camera_params(data_samples, device)
-        depth_out = self.depth_net(feats, cam_params=cam_params)
         lidar2img = self.lidar2img(data_samples, device)
         if lidar2img.shape[:2] != imgs.shape[:2]:
             raise ValueError(f'SDGOcc: lidar2img {tuple(lidar2img.shape)} '
@@ -334,27 +413,8 @@ class SDGOcc(BaseOccDetector):
                                   'by LiDAR depth')
             time_dims = [s.metainfo.get('points_time_dim')
                          for s in data_samples]
-        cam = self.view_transform(depth_out['context'], depth_out['depth'],
-                                  depth_out.get('seg_logits'), points,
-                                  lidar2img, imgs.shape[-2:], time_dims)
-        return depth_out, cam
-
-    def frame_camera_bev(self, inputs: dict, data_samples: Sequence
-                         ) -> Tuple[Dict[str, Tensor], Dict[str, Tensor]]:
-        """DepthNet outputs and the camera BEV F_bev^C of one frame.
-
-        :meth:`lift_camera_bev`, then ``camera_bev_conv``.
-
-        Returns:
-            tuple[dict, dict]: The DepthNet outputs and the view-transform
-            outputs with ``bev`` (B, C, Y, X) after the learned layer and
-            ``bev_pooled``, the view transform's own; ``bev_mask`` (B, 1,
-            Y, X) stays the pooled coverage (FOAD's M_img).
-        """
-        depth_out, cam = self.lift_camera_bev(inputs, data_samples)
-        cam['bev_pooled'] = cam['bev']
-        cam['bev'] = self.camera_bev_conv(cam['bev'])
-        return depth_out, cam
+        return self.camera_bev(imgs, lidar2img, cam_params, points,
+                               time_dims)
 
     def extract_camera_bev(self, inputs: dict, data_samples: Sequence
                            ) -> Tuple[Dict[str, Tensor], Dict[str, Tensor]]:
@@ -551,8 +611,23 @@ class SDGOcc(BaseOccDetector):
                                      head.predict(encoder(fused)))
         return self.add_pred_occ(
             data_samples,
-            self.occ_head.predict(
-                self.bev_encoder(self.extract_feat(inputs, data_samples))))
+            self.decode(self.extract_feat(inputs, data_samples),
+                        with_logits=False)[1])
+
+    def decode(self, bev: Tensor, with_logits: bool = True
+               ) -> Tuple[Optional[Tensor], Tensor]:
+        """Occupancy of the BEV the head sees: BEV encoder and
+        channel-to-height head, on tensors (shared with the ONNX graphs).
+
+        Args:
+            bev (Tensor): Shape (B, C, Y, X).
+            with_logits (bool): Also return the logits. Defaults to True.
+
+        Returns:
+            tuple: Logits (B, num_classes, X, Y, Z), or None without
+            ``with_logits``, and labels, int64 (B, X, Y, Z).
+        """
+        return self.occ_head.decode(self.bev_encoder(bev), with_logits)
 
     def _teacher_decoder(self) -> tuple:
         """SDG-KL teacher's BEV encoder and head (the student's unless
@@ -569,6 +644,4 @@ class SDGOcc(BaseOccDetector):
                              'teacher through predict (tools/test.py); the '
                              'inference path (tensor mode, export) is the '
                              "student's")
-        return height_logits_to_xyz(
-            self.occ_head(
-                self.bev_encoder(self.extract_feat(inputs, data_samples))))
+        return self.decode(self.extract_feat(inputs, data_samples))[0]

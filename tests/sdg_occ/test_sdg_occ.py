@@ -24,10 +24,9 @@ def _cfg(variant):
         cfg = _cfg('fusion')
         for key in ('lidar_encoder', 'fusion', 'loss_distill'):
             cfg.pop(key)
-        return dict(cfg, variant='camera')
+        return cfg
     return dict(
         type='SDGOcc',
-        variant=variant,
         point_cloud_range=PC_RANGE,
         voxel_size=(2.0, 2.0, 1.0),  # 8 x 8 x 4 voxels
         num_classes=NUM_CLASSES,
@@ -304,17 +303,34 @@ def test_all_ignored_targets_and_no_points():
     sum(losses.values()).backward()
 
 
+@pytest.mark.parametrize('variant', ['camera', 'fusion', 'kl'])
+def test_the_sub_modules_say_the_variant(variant):
+    """No switch: a fusion without a distillation loss is SDG-Fusion, with
+    one SDG-KL, neither the camera rows. A config written when the variant
+    was a string still builds where it agrees with its sub-modules."""
+    assert _model(variant).variant == variant
+    assert MODELS.build(dict(_cfg(variant), variant=variant)).variant == \
+        variant
+
+
 def test_bad_config_and_inputs_raise():
     cfg = _cfg('kl')
     cfg.pop('loss_distill')
-    with pytest.raises(ValueError, match='loss_distill'):
-        MODELS.build(cfg)
-    with pytest.raises(ValueError, match='variant'):
+    with pytest.raises(ValueError, match=r"variant='kl'\) contradicts its "
+                       "sub-modules, which make 'fusion'"):
+        MODELS.build(dict(cfg, variant='kl'))
+    with pytest.raises(ValueError, match='variant must be one of'):
         MODELS.build(dict(_cfg('fusion'), variant='lidar'))
-    with pytest.raises(ValueError, match='no LiDAR branch'):
+    with pytest.raises(ValueError, match='contradicts'):
         MODELS.build(dict(_cfg('fusion'), variant='camera'))
-    with pytest.raises(ValueError, match='needs a lidar_encoder'):
+    with pytest.raises(ValueError, match='contradicts'):
         MODELS.build(_cfg('camera') | dict(variant='fusion'))
+    with pytest.raises(ValueError, match='needs both a lidar_encoder and a '
+                       'fusion'):
+        MODELS.build(dict(_cfg('fusion'), fusion=None))
+    with pytest.raises(ValueError, match=r'loss_distill \(SDG-KL\) needs'):
+        MODELS.build(dict(_cfg('camera'),
+                          loss_distill=_cfg('kl')['loss_distill']))
     cfg = _cfg('fusion')
     cfg['fusion']['source_channels'] = 8  # the LiDAR width: wrong way
     with pytest.raises(ValueError, match='has source_channels=8'):

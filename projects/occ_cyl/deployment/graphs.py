@@ -104,10 +104,9 @@ class OccCylPlaneGraph(nn.Module):
             tuple[Tensor, Tensor]: ``occ_logits`` (1, K, X, Y, Z) and
             ``occ_labels`` (1, X, Y, Z), int64.
         """
-        logits = self.model.occ_head(
-            self.model.tpv_encoder(
-                (plane_r_theta, plane_theta_z, plane_r_z)))[0]
-        return logits, logits.argmax(dim=1)
+        logits = self.model.decode(
+            (plane_r_theta, plane_theta_z, plane_r_z))
+        return logits[0], self.model.occ_head.predict(logits)
 
 
 def fused_planes(model: nn.Module, batch: dict) -> List[Tensor]:

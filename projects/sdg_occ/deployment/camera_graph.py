@@ -4,8 +4,9 @@ At inference SDG-KL (and the camera rows of Table 3) run images ->
 DepthNet -> SDG view transform guided by the key-frame LiDAR points ->
 ``camera_bev_conv`` -> BEV encoder -> channel-to-height head
 (:meth:`~projects.sdg_occ.SDGOcc.extract_feat`); the SPVCNN branch and the
-fusion are training-only. :class:`SDGCameraGraph` calls those same
-modules, but on tensors instead of data samples, so that the whole path is
+fusion are training-only. :class:`SDGCameraGraph` calls the model's own
+tensor-level core of that path (:meth:`~projects.sdg_occ.SDGOcc.camera_bev`
+and :meth:`~projects.sdg_occ.SDGOcc.decode`), so that the whole path is
 one graph whose inputs are the images, the camera matrices the model
 reads from the metainfo and the LiDAR points (any number of them).
 Nothing of the sample it is traced with stays in the graph: every inverse
@@ -23,8 +24,6 @@ from projects.occ_common.deployment.image_preprocess import \
     GraphImagePreprocess
 from projects.occ_common.models.layers.camera_geometry import \
     camera_parameter_vector
-from ..c2h_head import (channels_to_height, height_labels_to_xyz,
-                        height_logits_to_xyz)
 
 #: Graph input names, in the order of :meth:`SDGCameraGraph.forward`.
 INPUT_NAMES = ('imgs', 'points', 'cam2img', 'lidar2cam', 'img_aug_matrix',
@@ -84,36 +83,13 @@ class SDGCameraGraph(nn.Module):
         Returns:
             Tensor: Shape (1, C, Y, X).
         """
-        model = self.model
-        imgs = self.preprocess(imgs)
-        feats = model.extract_img_feat(imgs)
         cam_params = None
-        if getattr(model.depth_net, 'camera_param_dims', 0) > 0:
+        if getattr(self.model.depth_net, 'camera_param_dims', 0) > 0:
             cam_params = camera_parameter_vector(
                 cam2img, lidar2cam, img_aug_matrix).flatten(0, 1)
-        depth_out = model.depth_net(feats, cam_params=cam_params)
-        use_sdg = model.view_transform.use_sdg
-        cam = model.view_transform(
-            depth_out['context'], depth_out['depth'],
-            depth_out.get('seg_logits'), [points] if use_sdg else None,
-            lidar2img, imgs.shape[-2:], [self.time_dim])
-        return model.camera_bev_conv(cam['bev'])
-
-    def decode(self, bev: Tensor) -> Tuple[Tensor, Tensor]:
-        """Occupancy logits and labels of the BEV the head sees.
-
-        Returns:
-            tuple[Tensor, Tensor]: Logits (1, num_classes, X, Y, Z) and
-            their argmax, int64 (1, X, Y, Z).
-        """
-        head = self.model.occ_head
-        # The head's forward, once, for both outputs; the labels as
-        # ``predict`` takes them, from the contiguous class axis (an
-        # argmax over the permuted logits costs ~3x more, issue 18).
-        raw = head.predictor(head.convs(self.model.bev_encoder(bev)))
-        logits = height_logits_to_xyz(
-            channels_to_height(raw, head.num_classes, head.dz))
-        return logits, height_labels_to_xyz(raw, head.num_classes, head.dz)
+        return self.model.camera_bev(self.preprocess(imgs), lidar2img,
+                                     cam_params, [points],
+                                     [self.time_dim])[1]['bev']
 
     def forward(self, imgs: Tensor, points: Tensor, cam2img: Tensor,
                 lidar2cam: Tensor, img_aug_matrix: Tensor,
@@ -143,5 +119,5 @@ class SDGCameraGraph(nn.Module):
         """
         bev = self.camera_bev(imgs, points, cam2img, lidar2cam,
                               img_aug_matrix, lidar2img)
-        outputs = self.decode(bev)
+        outputs = self.model.decode(bev)
         return outputs + (bev, ) if self.with_bev else outputs

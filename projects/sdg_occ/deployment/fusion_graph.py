@@ -52,5 +52,5 @@ class SDGFusionDenseGraph(SDGCameraGraph):
         """
         bev = self.camera_bev(imgs, points, cam2img, lidar2cam,
                               img_aug_matrix, lidar2img)
-        outputs = self.decode(self.model.fusion(bev, lidar_bev))
+        outputs = self.model.decode(self.model.fusion(bev, lidar_bev))
         return outputs + (bev, ) if self.with_bev else outputs
