@@ -1,9 +1,13 @@
 """Evaluate a checkpoint (mmdet3d 1.x ``tools/test.py`` interface).
 
 The models, datasets and hooks come from the config's ``custom_imports``;
-the script itself imports only helpers of ``projects.occ_common.utils``
-(CPU process groups, config checks). Flags and behaviour follow mmdet3d
-1.4's script, with checks added: the script adds ``CheckpointMatchHook``,
+the script itself imports only the harness of ``projects.occ_common``
+(``engine``: CPU process groups, config checks; ``apis``: the unlabelled
+pipeline). Flags and behaviour follow mmdet3d 1.4's script, without the
+flags that cannot work here (``--show`` opens a window, which a headless
+GPU server has not: ``--show-dir`` writes the pictures instead; ``--tta``
+needs a test-time augmentation that no config defines), and with checks
+added: the script adds ``CheckpointMatchHook``,
 which installs the restricted checkpoint loader before anything is loaded
 and refuses a checkpoint with non-finite weights, or whose keys or shapes
 differ from the model's (unless ``--allow-key-mismatch``);
@@ -24,7 +28,7 @@ import copy
 import os
 import os.path as osp
 
-from mmengine.config import Config, ConfigDict
+from mmengine.config import Config
 from mmengine.registry import RUNNERS
 from mmengine.runner import Runner
 
@@ -39,21 +43,19 @@ from projects.occ_common.engine.cpu_dist import (finalize_distributed,
 
 def parse_args(argv=None):
     """Parse the command line (same flags as mmdet3d 1.4's test.py)."""
-    parser = argparse.ArgumentParser(description='Test (and eval) a model')
+    # No abbreviations: mmdet3d's --show would otherwise read as --show-dir.
+    parser = argparse.ArgumentParser(
+        description='Test (and eval) a model', allow_abbrev=False)
     parser.add_argument('config', help='test config file path')
     parser.add_argument('checkpoint', help='checkpoint file')
     parser.add_argument(
         '--work-dir',
         help='the directory to save the file containing evaluation metrics')
     parser.add_argument(
-        '--show', action='store_true', help='show prediction results')
-    parser.add_argument(
         '--show-dir',
         help='directory where painted images will be saved. '
         'If specified, it will be automatically saved '
         'to the work_dir/timestamp/show_dir')
-    parser.add_argument(
-        '--wait-time', type=float, default=2, help='the interval of show (s)')
     parser.add_argument(
         '--cfg-options',
         nargs='+',
@@ -69,7 +71,6 @@ def parse_args(argv=None):
         choices=['none', 'pytorch', 'slurm', 'mpi'],
         default='none',
         help='job launcher')
-    parser.add_argument('--tta', action='store_true', help='test time aug')
     parser.add_argument(
         '--format-only',
         action='store_true',
@@ -98,14 +99,10 @@ def trigger_visualization_hook(cfg: Config, args) -> Config:
     if 'visualization' not in default_hooks:
         raise RuntimeError(
             'VisualizationHook must be included in default_hooks to use '
-            '--show or --show-dir; refer to the configs in configs/_base_.')
+            '--show-dir; refer to the configs in configs/_base_.')
     visualization_hook = default_hooks['visualization']
     visualization_hook['draw'] = True
-    if args.show:
-        visualization_hook['show'] = True
-        visualization_hook['wait_time'] = args.wait_time
-    if args.show_dir:
-        visualization_hook['test_out_dir'] = args.show_dir
+    visualization_hook['test_out_dir'] = args.show_dir
     return cfg
 
 
@@ -155,16 +152,8 @@ def build_cfg(args) -> Config:
             type='CheckpointMatchHook',
             allow_key_mismatch=args.allow_key_mismatch)
     ]
-    if args.show or args.show_dir:
+    if args.show_dir:
         cfg = trigger_visualization_hook(cfg, args)
-
-    if args.tta:
-        if 'tta_model' not in cfg or 'tta_pipeline' not in cfg:
-            raise RuntimeError(
-                f'--tta needs `tta_model` and `tta_pipeline` in {args.config}')
-        cfg.test_dataloader.dataset.pipeline = cfg.tta_pipeline
-        cfg.tta_model.module = cfg.model
-        cfg.model = ConfigDict(**cfg.tta_model)
     return cfg
 
 

@@ -382,3 +382,16 @@ def test_env_cfg_typo_is_refused():
         [CONFIG, 'x.pth', '--cfg-options', 'env_cfg.mp_cfg.start=fork'])
     with pytest.raises(ValueError, match=r"env_cfg.mp_cfg: 'start'"):
         test_tool.build_cfg(args)
+
+
+@pytest.mark.parametrize('flag', ['--show', '--tta', '--wait-time=1'])
+def test_test_py_offers_only_options_that_work(flag, capsys):
+    """mmdet3d's --show (a window) and --tta (no config defines a test-time
+    augmentation) only ended in tracebacks here; they are not offered, and
+    argparse refuses them in one line. --show-dir, which works, stays."""
+    with pytest.raises(SystemExit) as end:
+        test_tool.parse_args([CONFIG, 'ckpt.pth', flag])
+    assert end.value.code == 2
+    assert 'unrecognized arguments' in capsys.readouterr().err
+    args = test_tool.parse_args([CONFIG, 'ckpt.pth', '--show-dir', 'pics'])
+    assert args.show_dir == 'pics'

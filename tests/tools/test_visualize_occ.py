@@ -312,3 +312,36 @@ def test_test_py_show_dir_writes_one_png_per_sample(tmp_path):
         'token3.png']
     widths = {_png_size(p)[0] for p in pictures}
     assert len(widths) == 1
+
+
+def test_saved_labels_say_their_convention(tmp_path, capsys):
+    """A grid holding Occ3D's free label 17, saved without a convention,
+    ends the tool in one line naming --convention (before: a traceback
+    from the renderer, 'labels [17] are outside [0, 17)'); with --config
+    of an Occ3D config it draws; --save-pred writes the convention and
+    class names, so that its file draws with no flag at all."""
+    tool = load_tool('tools/misc/visualize_occ.py')
+    grid = np.full((4, 4, 2), 17, dtype=np.int64)
+    grid[0, 0, 0] = 4  # a car
+    old = str(tmp_path / 'old.npz')
+    np.savez_compressed(old, pred_occ=grid)
+    fast = ['--view-size', '40', '60']
+    with pytest.raises(SystemExit) as end:
+        tool.main(['--pred', old, '--out', str(tmp_path / 'a.png')] + fast)
+    assert end.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert 'pred_occ holds labels [17], outside the 17 classes' in err
+    assert '--convention occ3d' in err
+    occ3d = osp.join(ROOT, 'configs', 'sdg_occ',
+                     'sdgocc-fusion_tiny_1xb1-6e_occ3d-nus-synthetic.py')
+    saved = str(tmp_path / 'saved.npz')
+    tool.main(['--pred', old, '--config', occ3d, '--out',
+               str(tmp_path / 'b.png'), '--save-pred', saved] + fast)
+    assert osp.isfile(tmp_path / 'b.png')
+    with np.load(saved, allow_pickle=False) as data:
+        assert str(data['convention']) == 'occ3d'
+        assert len(data['class_names']) == 18
+        assert str(data['class_names'][17]) == 'free'
+    tool.main(['--pred', saved, '--out', str(tmp_path / 'c.png')] + fast)
+    assert osp.isfile(tmp_path / 'c.png')

@@ -8,9 +8,10 @@ Two sources:
   (``--cameras`` adds the six images with the occupancy projected onto
   them; ``--save-pred F.npz`` also stores the grids);
 - saved grids: ``--pred F`` and / or ``--gt F``, each an ``.npz`` (keys
-  ``pred_occ`` / ``gt_occ`` / ``mask_camera`` as ``--save-pred`` writes
-  them; Occ3D's ``labels.npz`` with ``semantics`` and ``mask_camera``; an
-  Occ3D submission file of ``tools/test.py --format-only`` or the
+  ``pred_occ`` / ``gt_occ`` / ``mask_camera``, with the label
+  ``convention`` and ``class_names``, as ``--save-pred`` writes them;
+  Occ3D's ``labels.npz`` with ``semantics`` and ``mask_camera``; an Occ3D
+  submission file of ``tools/test.py --format-only`` or the
   challenge's ``<token>.npz``; FlashOcc's ``pred.npz`` with ``pred``, whose
   pickled ``gt`` is never loaded; these imply ``--convention occ3d``) or an
   ``.npy`` (a dense (X, Y, Z) grid, or SurroundOcc's sparse (N, 4) ``x, y,
@@ -24,12 +25,20 @@ Examples::
     python tools/misc/visualize_occ.py --pred sample0.npz --out sample0.png
     python tools/misc/visualize_occ.py --gt data/gts/scene/token/labels.npz \\
         --convention occ3d --out gt.png
+    python tools/misc/visualize_occ.py --pred old.npz --config CFG --out p.png
+
+The labels of saved grids follow, in this order: ``--convention`` /
+``--class-names``, the file's own (``--save-pred`` stores them), the
+metric of ``--config`` given without ``--checkpoint``, the file layout's
+(Occ3D's files), else SurroundOcc's; labels that do not fit end the tool
+with one line naming the flag to pass.
 
 Unlike the train and test tools this script imports the plugin's renderer
 directly: it draws grids that need no config.
 """
 import argparse
 import os.path as osp
+import sys
 from typing import Dict, Optional, Sequence
 
 import numpy as np
@@ -47,7 +56,10 @@ def parse_args(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--out', required=True, help='output PNG file')
     model = parser.add_argument_group('from a model')
-    model.add_argument('--config', help='config file')
+    model.add_argument(
+        '--config',
+        help='config file (with --pred / --gt and no --checkpoint: only '
+        'its label convention and class names are read)')
     model.add_argument('--checkpoint', help='checkpoint file')
     model.add_argument(
         '--index', type=int, default=0, help='sample index in the test set')
@@ -101,11 +113,14 @@ def parse_args(argv=None):
         '--view-size', type=int, nargs=2, default=(360, 480),
         help='(H, W) of the 3D views')
     args = parser.parse_args(argv)
-    from_model = args.config is not None or args.checkpoint is not None
-    if from_model and (args.config is None or args.checkpoint is None):
-        parser.error('--config and --checkpoint go together.')
-    if from_model == (args.pred is not None or args.gt is not None):
+    saved_grids = args.pred is not None or args.gt is not None
+    if args.checkpoint is not None and args.config is None:
+        parser.error('--checkpoint needs --config.')
+    if args.checkpoint is not None and saved_grids:
         parser.error('give either --config/--checkpoint or --pred/--gt.')
+    if args.checkpoint is None and not saved_grids:
+        parser.error('give --config/--checkpoint, or --pred/--gt (with an '
+                     'optional --config for the labels).')
     return args
 
 
@@ -142,8 +157,8 @@ def load_grid(path: str, key: str,
     if path.endswith('.npz'):
         with np.load(path, allow_pickle=False) as data:
             names = list(data.files)
-            wanted = ['pred_occ', 'gt_occ', 'mask_camera'] + list(
-                FOREIGN_KEYS)
+            wanted = ['pred_occ', 'gt_occ', 'mask_camera', 'convention',
+                      'class_names'] + list(FOREIGN_KEYS)
             found = {}
             for name in wanted:
                 if name in names:
@@ -155,6 +170,11 @@ def load_grid(path: str, key: str,
             k: found[k]
             for k in ('pred_occ', 'gt_occ', 'mask_camera') if k in found
         }
+        # Written by --save-pred: the labels' own convention and names.
+        if 'convention' in found:
+            grids['convention'] = str(found['convention'])
+        if 'class_names' in found:
+            grids['class_names'] = [str(n) for n in found['class_names']]
         if key not in grids:
             # FlashOcc's 'pred' is a prediction, never a GT.
             foreign = [
@@ -196,6 +216,33 @@ def sparse_to_dense(rows: np.ndarray, occ_shape: Sequence[int],
     dense = np.zeros(tuple(occ_shape), dtype=np.int64)
     dense[rows[:, 0], rows[:, 1], rows[:, 2]] = rows[:, 3]
     return dense
+
+
+def check_label_range(sample: Dict, class_names: Sequence[str],
+                      convention: str, path: str) -> None:
+    """End the tool in one line when saved labels exceed the classes.
+
+    A grid saved from an Occ3D config (18 classes, free = 17) drawn with
+    SurroundOcc's 17 classes ended in a traceback deep in the renderer.
+
+    Raises:
+        SystemExit: Code 2, naming the file, the labels and the flags.
+    """
+    for key in ('pred_occ', 'gt_occ'):
+        grid = sample.get(key)
+        if grid is None:
+            continue
+        labels = np.unique(np.asarray(grid))
+        bad = labels[(labels < 0) | ((labels >= len(class_names))
+                                     & (labels != 255))]
+        if bad.size:
+            sys.stderr.write(
+                f'visualize_occ.py: error: {path}: {key} holds labels '
+                f'{bad.tolist()[:5]}, outside the {len(class_names)} classes '
+                f'of the {convention!r} convention; pass --convention occ3d '
+                '(or --config CONFIG, or --class-names) to say what they '
+                'are.\n')
+            raise SystemExit(2)
 
 
 def metric_labels(cfg) -> Dict:
@@ -243,7 +290,7 @@ def main(argv=None) -> Optional[str]:
     args = parse_args(argv)
     labels: Dict = {}
     img = None
-    if args.config is not None:
+    if args.checkpoint is not None:
         with cfg_errors_exit():
             sample, inputs, labels = predict_sample(args)
         if args.cameras:
@@ -259,8 +306,14 @@ def main(argv=None) -> Optional[str]:
             sample.update(load_grid(args.pred, 'pred_occ', args.occ_shape))
         name = osp.splitext(osp.basename(args.pred or args.gt))[0]
         sample['sample_idx'] = name
-        if 'convention' in sample:
-            labels.setdefault('convention', sample.pop('convention'))
+        for key in ('convention', 'class_names'):
+            if key in sample:
+                labels.setdefault(key, sample.pop(key))
+        if args.config is not None:
+            from mmengine.config import Config
+            for key, value in metric_labels(
+                    Config.fromfile(args.config)).items():
+                labels.setdefault(key, value)
     convention = args.convention or labels.get('convention', 'surroundocc')
     if isinstance(sample, dict):
         # Saved grids carry no lidar2ego: their convention's frame says
@@ -270,6 +323,9 @@ def main(argv=None) -> Optional[str]:
     default_names, empty_label = convention_classes(convention)
     class_names = (args.class_names or labels.get('class_names')
                    or default_names)
+    if args.checkpoint is None:
+        check_label_range(sample, class_names, convention,
+                          args.pred or args.gt)
     if args.save_pred:
         arrays = {}
         for key in ('pred_occ', 'gt_occ', 'mask_camera'):
@@ -278,7 +334,11 @@ def main(argv=None) -> Optional[str]:
                 value = value.cpu().numpy()
             if value is not None:
                 arrays[key] = np.asarray(value)
-        np.savez_compressed(args.save_pred, **arrays)
+        # Plain string arrays (no pickle): the file says what its labels
+        # are, so that --pred FILE draws it without further flags.
+        np.savez_compressed(args.save_pred, **arrays,
+                            convention=np.array(convention),
+                            class_names=np.array(list(class_names)))
     picture = render_data_sample(
         sample,
         class_names,
