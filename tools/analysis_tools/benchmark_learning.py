@@ -96,8 +96,8 @@ _SDG_SMALL_NOMASK = _SDG_SMALL.replace('-nus-', '-nus-nomask-')
 RUNS.update({
     'occcyl-small': (_OCC_SMALL, []),
     'occcyl-small-nodepthsup': (_OCC_SMALL, ['model.loss_depth=None']),
-    # Issue 49: on Occ3D labels without the camera mask, scored with
-    # RayIoU beside the camera-mask mIoU.
+    # On Occ3D labels without the camera mask, scored with RayIoU beside
+    # the camera-mask mIoU.
     'occcyl-small-occ3d-nomask': (_OCC_SMALL.replace(
         'surroundocc-nus', 'occ3d-nus-nomask'), []),
     # A cylinder of twice the small config's radial and angular cells:
@@ -113,10 +113,11 @@ RUNS.update({
     # ... and with the scene turned by a random multiple of 90 degrees
     # (OccBEVAug, exact on the square grid; index 7 of the training
     # pipeline), against the layout prior of 8 training scenes whose main
-    # road all runs along the driving direction. Issue 14, stop 42: 73.44
-    # / 37.48 and 72.06 / 36.27 IoU / mIoU (seeds 0, 1) against 74.58 /
-    # 38.41 and 73.20 / 38.88 without, and the held-out cross streets
-    # no more often driveable (24.0 and 35.9 % against 20.8 and 38.2 %).
+    # road all runs along the driving direction. On 2026-11-27
+    # (2e56599): 73.44 / 37.48 and 72.06 / 36.27 IoU / mIoU (seeds 0, 1)
+    # against 74.58 / 38.41 and 73.20 / 38.88 without, and the held-out
+    # cross streets no more often driveable (24.0 and 35.9 % against
+    # 20.8 and 38.2 %).
     'occcyl-small-seg2d-nodepthsup-rot90': (
         _OCC_SMALL_SEG2D, [
             'model.loss_depth=None',
@@ -126,11 +127,11 @@ RUNS.update({
     'sdg-kl-small': (_SDG_SMALL.format('kl'), []),
     # ... distilling standardised features (FOADDistillLoss's docstring:
     # eq. 8 on the raw ones pulled 7-13x harder than the occupancy loss
-    # at initialisation; issue 47).
+    # at initialisation).
     'sdg-kl-small-norm': (_SDG_SMALL.format('kl'),
                           ['model.loss_distill.normalize=channel']),
-    # Issue 49: trained without the camera mask, scored with RayIoU beside
-    # the camera-mask mIoU.
+    # Trained without the camera mask, scored with RayIoU beside the
+    # camera-mask mIoU.
     'sdg-fusion-small-nomask': (_SDG_SMALL_NOMASK.format('fusion'), []),
     'sdg-kl-small-nomask': (_SDG_SMALL_NOMASK.format('kl'), []),
     'sdg-camera-lss-small': (_SDG_SMALL.format('fusion'), _CAMERA_LSS),

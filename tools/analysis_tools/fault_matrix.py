@@ -348,7 +348,7 @@ CASES: List[Case] = [
          _valid_checkpoint(False), load_checkpoint_file),
     Case('valid info file with numpy objects', _HANDLED, _valid_info,
          load_info_file),
-    # Issue 48, items 4-7: data loss, silent input, unclear errors.
+    # Added 2026-11-28 (9e05221): data loss, silent input, unclear errors.
     Case('work dir copied with cp (file times reversed): --resume',
          _HANDLED, _copied_work_dir, _auto_resume_target),
     Case('--resume epoch_1.pth next to epoch_2/3.pth', _CLEAR,
