@@ -4,7 +4,6 @@
 # A config adds a dataset base and sets the coupled values on `model` from it
 # (point_cloud_range, voxel_size, num_classes, empty_index): the detector
 # hands them, its cylinder and its depth bins to the modules that need them.
-_base_ = ['../../_base_/schedules/adamw-24e.py']
 
 _img_stride = 16  # V is at 1/16 of the input (paper)
 _point_dims = 5  # x, y, z, intensity, time lag (merged sweeps, dataset)
@@ -221,8 +220,15 @@ model = dict(
 # 24 epochs of the lineage.
 # The pretrained image backbone learns at a tenth of the rate, as in
 # SurroundOcc and OCCFusion (the paper is silent).
+max_epochs = 24
+train_cfg = dict(
+    type='EpochBasedTrainLoop', max_epochs=max_epochs,
+    val_interval=max_epochs)
+val_cfg = dict(type='ValLoop')
+test_cfg = dict(type='TestLoop')
 optim_wrapper = dict(
-    optimizer=dict(lr=5e-5, weight_decay=0.01),
+    type='OptimWrapper',
+    optimizer=dict(type='AdamW', lr=5e-5, weight_decay=0.01),
     paramwise_cfg=dict(
         custom_keys={'img_encoder.backbone': dict(lr_mult=0.1)}),
     clip_grad=dict(max_norm=35, norm_type=2))
@@ -234,7 +240,7 @@ param_scheduler = [
         type='MultiStepLR',
         by_epoch=True,
         begin=0,
-        end=_base_.max_epochs,
+        end=max_epochs,
         milestones=[20, 23],
         gamma=0.1)
 ]

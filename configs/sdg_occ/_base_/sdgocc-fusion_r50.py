@@ -7,7 +7,6 @@
 # num_classes, empty_index) and the depth bins that cover its grid: the
 # detector hands them to the modules that need them. `kl_model` turns it
 # into SDG-KL.
-_base_ = ['../../_base_/schedules/adamw-24e.py']
 
 _img_stride = 16  # image features at 1/16 (paper)
 # 2D semantic classes: the 16 lidarseg classes 1..16 as projected by
@@ -195,8 +194,15 @@ camera_lss_model = dict(
 # learning rate of one RTX 4090 (paper) for 4 x 2 samples with
 # auto_scale_lr off unless tools/train.py --auto-scale-lr (mmdet3d's
 # convention).
+max_epochs = 24
+train_cfg = dict(
+    type='EpochBasedTrainLoop', max_epochs=max_epochs,
+    val_interval=max_epochs)
+val_cfg = dict(type='ValLoop')
+test_cfg = dict(type='TestLoop')
 optim_wrapper = dict(
-    optimizer=dict(lr=1e-4, weight_decay=1e-2),
+    type='OptimWrapper',
+    optimizer=dict(type='AdamW', lr=1e-4, weight_decay=1e-2),
     clip_grad=dict(max_norm=5, norm_type=2))
 param_scheduler = [
     dict(
