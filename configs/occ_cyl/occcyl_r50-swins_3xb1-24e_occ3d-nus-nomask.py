@@ -7,13 +7,4 @@ _base_ = ['./occcyl_r50-swins_3xb1-24e_occ3d-nus.py']
 
 # Every voxel is supervised (the base's loss_mask_key='mask_camera' off).
 model = dict(loss_mask_key=None)
-
-# RayIoU casts rays from every key frame of the sample's scene: it reads
-# their poses from the split's info file.
-_val = _base_.val_dataloader.dataset
-val_evaluator = [
-    _base_.val_evaluator,
-    dict(type='OccRayIoUMetric', data_root=_val.data_root,
-         ann_file=_val.ann_file)
-]
-test_evaluator = val_evaluator
+val_evaluator = test_evaluator = [_base_.val_evaluator, _base_.ray_iou_metric]

@@ -1,15 +1,13 @@
-# What every nuScenes occupancy dataset base shares: the cameras, sweeps,
-# loaders and image augmentation, the dataloaders and the metric. Not a
-# config on its own: occ3d-nus.py and surroundocc-nus.py add the label
-# format, its grid and classes, and assemble the pipelines from the pieces
-# below (a base's values are fixed when it is read, so the pieces that
-# depend on the grid are built there, not here).
+# What every nuScenes occupancy config shares: the cameras, sweeps, loaders
+# and image augmentation, the dataloaders and the metrics. Not a config on
+# its own: a config adds a label format (occ3d-task.py, surroundocc-task.py:
+# its grid, classes, label steps and metric) and assembles its pipelines
+# from both, as occ3d-nus.py and surroundocc-nus.py do (bases stay flat: a
+# base's values are fixed when it is read, so a piece that needs both files
+# is built in the file that lists them).
 # Prepare the data with (see docs/dataset_prepare.md):
 #   python tools/create_data.py nuscenes --root-path data/nuscenes \
 #       --version v1.0-trainval
-custom_imports = dict(
-    imports=['projects.occ_common'], allow_failed_imports=False)
-
 data_root = 'data/nuscenes/'
 info_prefix = 'nuscenes_occ'
 cam_names = [
@@ -32,10 +30,7 @@ ego_box = [-0.9, -1.1, -0.5, 3.7, 1.1, 2.2]
 # Points carry x, y, z, intensity, time lag (the ring index of the files is
 # replaced by the time lag when the sweeps are merged).
 _key_frame = dict(
-    type='LoadOccPointsFromFile',
-    coord_type='LIDAR',
-    load_dim=5,
-    use_dim=5,
+    type='LoadOccPointsFromFile', coord_type='LIDAR', load_dim=5, use_dim=5,
     backend_args=backend_args)
 _remove_ego = dict(type='RemoveEgoPoints', ego_box=ego_box)
 # nuScenes-lidarseg point labels, for the 2-D semantic targets only
@@ -44,40 +39,26 @@ _remove_ego = dict(type='RemoveEgoPoints', ego_box=ego_box)
 _lidarseg = dict(
     type='LoadLidarSegLabels', optional=True, backend_args=backend_args)
 _sweeps = dict(
-    type='LoadOccPointsFromMultiSweeps',
-    sweeps_num=sweeps_num,
-    load_dim=5,
+    type='LoadOccPointsFromMultiSweeps', sweeps_num=sweeps_num, load_dim=5,
     use_dim=[0, 1, 2, 3, 4],
     # The box, not mmdet3d's remove_close (a 1 m sphere round the sensor
     # that misses the bonnet).
-    ego_box=ego_box,
-    backend_args=backend_args)
+    ego_box=ego_box, backend_args=backend_args)
 _images = dict(
-    type='LoadMultiViewImagesOcc',
-    cam_names=cam_names,
+    type='LoadMultiViewImagesOcc', cam_names=cam_names,
     backend_args=backend_args)
 # Up to the occupancy labels: points, sweeps, images and (training) BEVDet's
 # image augmentation, +-6 % scale, random horizontal crop, flips and
 # +-5.4 deg rotation.
 train_inputs = [
-    _key_frame,
-    _remove_ego,
-    _sweeps,
-    _images,
+    _key_frame, _remove_ego, _sweeps, _images,
     dict(
-        type='MultiViewImageAug',
-        final_size=img_size,
-        resize_range=(0.94, 1.06),
-        crop_x_range=(0.0, 1.0),
-        crop_y_range=(1.0, 1.0),
-        flip_prob=0.5,
-        rot_range=(-5.4, 5.4)),
+        type='MultiViewImageAug', final_size=img_size,
+        resize_range=(0.94, 1.06), crop_x_range=(0.0, 1.0),
+        crop_y_range=(1.0, 1.0), flip_prob=0.5, rot_range=(-5.4, 5.4)),
 ]
 test_inputs = [
-    _key_frame,
-    _remove_ego,
-    dict(_sweeps, test_mode=True),
-    _images,
+    _key_frame, _remove_ego, dict(_sweeps, test_mode=True), _images,
     dict(type='MultiViewImageAug', final_size=img_size, test_mode=True),
 ]
 # After the labels: BEV flips only (exact on the grid; other angles would
@@ -97,10 +78,9 @@ test_inputs_seg2d = [_key_frame, _lidarseg] + test_inputs[1:]
 train_targets_seg2d = train_targets + [dict(type='PointsToSemanticMaps')]
 test_targets_seg2d = test_targets + [dict(type='PointsToSemanticMaps')]
 
+# The dataloaders without the label format's keys and the pipelines.
 _dataset = dict(
-    type=dataset_type,
-    data_root=data_root,
-    cam_names=cam_names,
+    type=dataset_type, data_root=data_root, cam_names=cam_names,
     backend_args=backend_args)
 # Loader processes per GPU: the paper configs' training pipelines cost
 # 0.35 s (OccCylindrical, 1600x900) and 0.27 s (SDG-OCC, 256x704) of one
@@ -111,26 +91,37 @@ _dataset = dict(
 # Pinned host memory lets the batch's copy to the GPU run asynchronously.
 _workers = 4
 train_dataloader = dict(
-    batch_size=1,
-    num_workers=_workers,
-    persistent_workers=True,
-    pin_memory=True,
-    sampler=dict(type='DefaultSampler', shuffle=True),
+    batch_size=1, num_workers=_workers, persistent_workers=True,
+    pin_memory=True, sampler=dict(type='DefaultSampler', shuffle=True),
     dataset=dict(
         _dataset, ann_file=f'{info_prefix}_infos_train.pkl', test_mode=False))
-val_dataloader = dict(
-    batch_size=1,
-    num_workers=_workers,
-    persistent_workers=True,
-    pin_memory=True,
-    drop_last=False,
+val_dataloader = test_dataloader = dict(
+    batch_size=1, num_workers=_workers, persistent_workers=True,
+    pin_memory=True, drop_last=False,
     sampler=dict(type='DefaultSampler', shuffle=False),
     dataset=dict(
         _dataset, ann_file=f'{info_prefix}_infos_val.pkl', test_mode=True))
-test_dataloader = val_dataloader
 
-val_evaluator = dict(
+val_evaluator = test_evaluator = dict(
     type='OccupancyMetric',
     # OccCylindrical Tables II-III report rainy and night scenes.
     subsets=['rainy', 'night'])
-test_evaluator = val_evaluator
+# RayIoU (SparseOcc, Liu et al., ECCV 2024) of Occ3D labels, for the
+# configs trained without the camera mask (*-nomask*.py, which add it to
+# the voxel metric). It casts rays from every key frame of the sample's
+# scene: it reads their poses from the split's info file.
+ray_iou_metric = dict(
+    type='OccRayIoUMetric', data_root=data_root,
+    ann_file=val_dataloader['dataset']['ann_file'])
+
+# The synthetic nuScenes-format world of the CPU configs. Build it with
+#   python tools/dataset_converters/create_synthetic_nuscenes.py \
+#       data/nuscenes_synthetic
+#   python tools/create_data.py nuscenes --root-path data/nuscenes_synthetic \
+#       --version v1.0-mini
+# (the converter recognises the world and splits its last scenes off as val).
+# Worker processes only add start-up time on a world of a few samples;
+# these configs train on the CPU, where there is no device memory to pin for.
+_synthetic_root = 'data/nuscenes_synthetic/'
+_synthetic_loader = dict(
+    num_workers=0, persistent_workers=False, pin_memory=False)

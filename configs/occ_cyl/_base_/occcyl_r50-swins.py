@@ -4,6 +4,9 @@
 # A config adds a dataset base and sets the coupled values on `model` from it
 # (point_cloud_range, voxel_size, num_classes, empty_index): the detector
 # hands them, its cylinder and its depth bins to the modules that need them.
+custom_imports = dict(
+    imports=['projects.occ_common', 'projects.occ_cyl'],
+    allow_failed_imports=False)
 
 _img_stride = 16  # V is at 1/16 of the input (paper)
 _point_dims = 5  # x, y, z, intensity, time lag (merged sweeps, dataset)
@@ -247,6 +250,13 @@ param_scheduler = [
 # 3 GPUs x 1 sample (paper).
 auto_scale_lr = dict(enable=False, base_batch_size=3)
 
+# Inputs, which the paper configs apply to the dataset base's pipelines:
+# 1600x900 images (the dataset base crops to BEVDet's 256x704) and "10 LiDAR
+# sweeps", which the authors' OccFusion code loads as the key frame and 9
+# sweeps (LoadPointsFromMultiSweeps(sweeps_num=9)), 10 frames in all.
+paper_inputs = dict(
+    MultiViewImageAug=dict(final_size=(900, 1600)),
+    LoadOccPointsFromMultiSweeps=dict(sweeps_num=9))
 # Augmentation. The paper names none; its lineage (SurroundOcc, OCCFusion)
 # distorts the colours of each view (mmdet's PhotoMetricDistortion per
 # view) and moves no geometry, and so do the paper configs: the training

@@ -7,6 +7,9 @@
 # num_classes, empty_index) and the depth bins that cover its grid: the
 # detector hands them to the modules that need them. `kl_model` turns it
 # into SDG-KL.
+custom_imports = dict(
+    imports=['projects.occ_common', 'projects.sdg_occ'],
+    allow_failed_imports=False)
 
 _img_stride = 16  # image features at 1/16 (paper)
 # 2D semantic classes: the 16 lidarseg classes 1..16 as projected by
@@ -144,6 +147,13 @@ model = dict(
         avg_non_ignore=True,
         # The paper gives no weight; 0.5 is the authors' release's.
         loss_weight=0.5))
+
+# Depth bins per label grid (min, max, step in metres; not given by the
+# paper), which the dataset configs merge into `model`: on Occ3D those of
+# BEVDet-Occ / FlashOcc, which SDG-OCC builds on, 1..45 m at 0.5 m (88
+# bins); on SurroundOcc BEVDet's nuScenes 1..60 m at 0.5 m (118 bins),
+# which covers the 50 m grid along every camera axis.
+depth_bounds = dict(occ3d=[1.0, 45.0, 0.5], surroundocc=[1.0, 60.0, 0.5])
 
 # SDG-KL: SDG-Fusion's network trained with a LiDAR-dominant fusion (LiDAR
 # queries, camera keys / values; the detector swaps the widths) as a
