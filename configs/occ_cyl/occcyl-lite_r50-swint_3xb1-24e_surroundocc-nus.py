@@ -1,6 +1,7 @@
 # OccCylindrical, lighter (not the paper's size): the paper config with the
-# slimmer widths shipped before issue 11, 65 M parameters instead of
-# 111 M, for GPUs that do not hold the paper's model. The cylinder (Table
+# slimmer widths shipped before the paper-size model (commit 81709f4,
+# 2026-11-23), 65 M parameters instead of 111 M, for GPUs that do not hold
+# the paper's model. The cylinder (Table
 # VI), the inputs and the schedule are the paper config's; the image branch
 # feeds ResNet-50 stages 1-3 to a 256-channel V, the DepthNet is 256 wide
 # (BEVDepth's default DepthNet width) and the planes go through a Swin-T.
@@ -11,13 +12,11 @@ model = dict(
     img_encoder=dict(
         backbone=dict(out_indices=(1, 2, 3)),
         neck=dict(in_channels=[512, 1024, 2048], num_outs=3),
-        num_levels=3,
-        out_channels=_img_channels),
+        num_levels=3, out_channels=_img_channels),
     depth_net=dict(in_channels=_img_channels, mid_channels=_img_channels),
     tpv_encoder=dict(
-        backbone=dict(
-            depths=[2, 2, 6, 2],
-            drop_path_rate=0.2)),  # Swin-T's (Swin paper, mmdet configs)
+        # Swin-T's depths and drop-path rate (Swin paper, mmdet configs).
+        backbone=dict(depths=[2, 2, 6, 2], drop_path_rate=0.2)),
     # ImageNet Swin-T weights for the Swin-T (as PointOcc).
     pretrained=dict(
         tpv_backbone=dict(

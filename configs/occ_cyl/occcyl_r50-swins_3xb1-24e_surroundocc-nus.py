@@ -2,21 +2,16 @@
 # the model, schedule and inputs of _base_/occcyl_r50-swins.py (1600x900
 # images, the key frame + 9 sweeps, the lineage's augmentation), 3 GPUs x 1
 # sample.
-_base_ = [
-    '../_base_/datasets/nus-occ-common.py',
-    '../_base_/datasets/surroundocc-task.py', '../_base_/default_runtime.py',
-    './_base_/occcyl_r50-swins.py'
-]
+_base_ = ['../_base_/datasets/nus-occ-common.py',
+          '../_base_/datasets/surroundocc-task.py',
+          '../_base_/default_runtime.py', './_base_/occcyl_r50-swins.py']
 
-# The coupled values, from the label format.
 model = _base_.occ_task
-
 # The dataset base's pipelines around the labels, with the paper's inputs
 # and the lineage's photometric-only training augmentation.
-_inputs = _base_.paper_inputs
+_inputs, _aug = _base_.paper_inputs, _base_.lineage_train_aug
 img_size = _inputs.MultiViewImageAug.final_size
 sweeps_num = _inputs.LoadOccPointsFromMultiSweeps.sweeps_num
-_aug = _base_.lineage_train_aug
 train_pipeline = [
     step for t in _base_.train_inputs + _base_._labels + _base_.train_targets +
     _base_._crop_and_pack for step in

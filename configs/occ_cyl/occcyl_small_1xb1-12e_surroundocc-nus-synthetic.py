@@ -1,13 +1,10 @@
 # The small OccCylindrical of the held-out learning benchmark
-# (_base_/occcyl_small_nus-synthetic.py says how it is sized) on the
-# synthetic world's SurroundOcc labels.
-_base_ = [
-    './_base_/occcyl_small_nus-synthetic.py',
-    '../_base_/datasets/surroundocc-task.py', '../_base_/cpu_smoke_runtime.py'
-]
+# (_base_/occcyl_small_nus-synthetic.py) on the synthetic world's
+# SurroundOcc labels.
+_base_ = ['./_base_/occcyl_small_nus-synthetic.py',
+          '../_base_/datasets/surroundocc-task.py',
+          '../_base_/cpu_smoke_runtime.py']
 
-# The coupled values, from the label format (the synthetic world writes
-# full-size labels, so the output grid stays).
 model = _base_.occ_task
 train_pipeline = (
     _base_._small_train_inputs + _base_._labels +

@@ -1,10 +1,7 @@
 # A tiny SDG-Fusion that trains on CPU in a few minutes on the synthetic
-# nuScenes-format world (Occ3D labels): every module of the full model, at
-# a fraction of its width (_base_/sdgocc-fusion_tiny.py). For smoke tests
-# and the demo, not for accuracy.
-_base_ = [
-    './_base_/sdgocc-fusion_tiny_occ3d-nus-synthetic.py',
-    '../_base_/cpu_smoke_runtime.py'
-]
+# world's Occ3D labels (_base_/sdgocc-fusion_tiny.py): for smoke tests and
+# the demo, not for accuracy.
+_base_ = ['./_base_/sdgocc-fusion_tiny_occ3d-nus-synthetic.py',
+          '../_base_/cpu_smoke_runtime.py']
 
 default_hooks = dict(checkpoint=dict(interval=_base_.max_epochs))

@@ -1,7 +1,6 @@
-# SDG-KL on Occ3D-nuScenes trained without the camera mask and scored with
-# RayIoU beside the camera-mask mIoU: sdgocc-kl_r50_4xb2-24e_occ3d-nus.py's
-# model on sdgocc-fusion_r50_4xb2-24e_occ3d-nus-nomask.py's supervision and
-# metrics (that file says why).
+# SDG-KL (sdgocc-kl_r50_4xb2-24e_occ3d-nus.py) trained without the camera
+# mask and scored with RayIoU, as sdgocc-fusion_r50_4xb2-24e_occ3d-nus-nomask
+# .py is SDG-Fusion.
 _base_ = ['./sdgocc-fusion_r50_4xb2-24e_occ3d-nus.py']
 
 model = dict(_base_.kl_model, loss_mask_key=None)

@@ -1,11 +1,8 @@
-# The small SDG-KL (its student scored) on the synthetic world's Occ3D
-# labels, trained without the camera mask and scored with RayIoU beside the
-# camera-mask mIoU: sdgocc-kl_small_*.py's model on the no-mask SDG-Fusion's
-# data and metrics (sdgocc-fusion_small_*-nomask-synthetic.py).
-_base_ = [
-    './_base_/sdgocc-fusion_small_occ3d-nus-synthetic.py',
-    '../_base_/cpu_smoke_runtime.py'
-]
+# The small SDG-KL (its student scored; sdgocc-kl_small_*.py) on the no-mask
+# SDG-Fusion's supervision and metrics
+# (sdgocc-fusion_small_*-nomask-synthetic.py).
+_base_ = ['./_base_/sdgocc-fusion_small_occ3d-nus-synthetic.py',
+          '../_base_/cpu_smoke_runtime.py']
 
 default_hooks = dict(checkpoint=dict(interval=_base_.max_epochs))
 model = dict(_base_.kl_model, loss_mask_key=None)

@@ -7,12 +7,9 @@ occ_format = 'occ3d'
 # the ego frame.
 point_cloud_range = [-40.0, -40.0, -1.0, 40.0, 40.0, 5.4]
 voxel_size = [0.4, 0.4, 0.4]
-grid_size = [
-    round((point_cloud_range[i + 3] - point_cloud_range[i]) / voxel_size[i])
-    for i in range(3)
-]  # [200, 200, 16]
-# 'others' (label 0), the 16 nuScenes-lidarseg classes (1..16), 'free'
-# (17).
+grid_size = [round((point_cloud_range[i + 3] - point_cloud_range[i]) /
+                   voxel_size[i]) for i in range(3)]  # [200, 200, 16]
+# 'others' (label 0), the 16 nuScenes-lidarseg classes (1..16), 'free' (17).
 class_names = [
     'others', 'barrier', 'bicycle', 'bus', 'car', 'construction_vehicle',
     'motorcycle', 'pedestrian', 'traffic_cone', 'trailer', 'truck',
@@ -26,10 +23,8 @@ empty_index = class_names.index('free')
 # label and, as the metric counts only camera-visible voxels, only those
 # are supervised (BEVDet-Occ / FlashOcc's use_mask; neither paper says).
 occ_task = dict(
-    point_cloud_range=point_cloud_range,
-    voxel_size=voxel_size,
-    num_classes=num_classes,
-    empty_index=empty_index,
+    point_cloud_range=point_cloud_range, voxel_size=voxel_size,
+    num_classes=num_classes, empty_index=empty_index,
     loss_mask_key='mask_camera')
 
 _labels = [
@@ -43,13 +38,10 @@ _crop_and_pack = [
     dict(type='PackOccInputs'),
 ]
 _occ_dataset = dict(occ_format=occ_format, metainfo=dict(classes=class_names))
-# Merged into nus-occ-common.py's OccupancyMetric.
+# Merged into nus-occ-common.py's OccupancyMetric: Occ3D's protocol counts
+# only the voxels a camera sees; SDG-OCC Fig. 7 reports IoU by distance
+# from the ego.
 _occ_metric = dict(
-    convention=occ_format,
-    class_names=class_names,
-    # Occ3D's protocol: only voxels seen by a camera count.
-    use_camera_mask=True,
-    # SDG-OCC Fig. 7 reports IoU by distance from the ego.
-    distance_ranges=[(0, 20), (20, 30), (30, 40)],
-    voxel_size=voxel_size,
+    convention=occ_format, class_names=class_names, use_camera_mask=True,
+    distance_ranges=[(0, 20), (20, 30), (30, 40)], voxel_size=voxel_size,
     point_cloud_range=point_cloud_range)

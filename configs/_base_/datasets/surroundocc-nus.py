@@ -1,26 +1,21 @@
-# nuScenes + SurroundOcc occupancy labels (200x200x16, 0.5 m, LiDAR frame)
-# as one dataset config (the data tools and the dataset tests load it): the
-# pieces of nus-occ-common.py around the label step of surroundocc-task.py.
-# The model configs assemble the same pieces themselves (bases stay flat, so a
-# config plus its bases is at most three files). For the synthetic world
-# override data_root.
+# nuScenes with SurroundOcc labels as one dataset config (for the data
+# tools and tests; the model configs assemble the same pieces themselves):
+# nus-occ-common.py around surroundocc-task.py's label step.
 _base_ = ['./nus-occ-common.py', './surroundocc-task.py']
 
-custom_imports = dict(
-    imports=['projects.occ_common'], allow_failed_imports=False)
-train_pipeline = (
-    _base_.train_inputs + _base_._labels + _base_.train_targets +
-    _base_._crop_and_pack)
-test_pipeline = (
-    _base_.test_inputs + _base_._labels + _base_.test_targets +
-    _base_._crop_and_pack)
-# With the 2-D semantic targets (gt_seg_2d) of SDG-OCC.
-train_pipeline_seg2d = (
-    _base_.train_inputs_seg2d + _base_._labels + _base_.train_targets_seg2d +
-    _base_._crop_and_pack)
-test_pipeline_seg2d = (
-    _base_.test_inputs_seg2d + _base_._labels + _base_.test_targets_seg2d +
-    _base_._crop_and_pack)
+custom_imports = dict(imports=['projects.occ_common'],
+                      allow_failed_imports=False)
+# The plain pipelines (OccCylindrical's) and those with SDG-OCC's 2-D
+# semantic targets (gt_seg_2d).
+train_pipeline, test_pipeline, train_pipeline_seg2d, test_pipeline_seg2d = [
+    inputs + _base_._labels + targets + _base_._crop_and_pack
+    for inputs, targets in [(_base_.train_inputs, _base_.train_targets),
+                            (_base_.test_inputs, _base_.test_targets),
+                            (_base_.train_inputs_seg2d,
+                             _base_.train_targets_seg2d),
+                            (_base_.test_inputs_seg2d,
+                             _base_.test_targets_seg2d)]
+]
 train_dataloader = dict(
     dataset=dict(_base_._occ_dataset, pipeline=train_pipeline))
 val_dataloader = test_dataloader = dict(

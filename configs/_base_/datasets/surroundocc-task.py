@@ -7,10 +7,8 @@ occ_format = 'surroundocc'
 # voxels, in the LiDAR frame.
 point_cloud_range = [-50.0, -50.0, -5.0, 50.0, 50.0, 3.0]
 voxel_size = [0.5, 0.5, 0.5]
-grid_size = [
-    round((point_cloud_range[i + 3] - point_cloud_range[i]) / voxel_size[i])
-    for i in range(3)
-]  # [200, 200, 16]
+grid_size = [round((point_cloud_range[i + 3] - point_cloud_range[i]) /
+                   voxel_size[i]) for i in range(3)]  # [200, 200, 16]
 # 'empty' (label 0) then the 16 nuScenes-lidarseg classes (labels 1..16).
 class_names = [
     'empty', 'barrier', 'bicycle', 'bus', 'car', 'construction_vehicle',
@@ -25,10 +23,8 @@ empty_index = class_names.index('empty')
 # empty label. SurroundOcc has no visibility mask: every voxel is
 # supervised.
 occ_task = dict(
-    point_cloud_range=point_cloud_range,
-    voxel_size=voxel_size,
-    num_classes=num_classes,
-    empty_index=empty_index)
+    point_cloud_range=point_cloud_range, voxel_size=voxel_size,
+    num_classes=num_classes, empty_index=empty_index)
 
 _labels = [dict(type='LoadOccupancyGT', occ_format=occ_format)]
 _crop_and_pack = [
@@ -36,12 +32,9 @@ _crop_and_pack = [
     dict(type='PackOccInputs'),
 ]
 _occ_dataset = dict(occ_format=occ_format, metainfo=dict(classes=class_names))
-# Merged into nus-occ-common.py's OccupancyMetric.
+# Merged into nus-occ-common.py's OccupancyMetric: no visibility mask;
+# SDG-OCC Fig. 7 reports IoU by distance from the ego.
 _occ_metric = dict(
-    convention=occ_format,
-    class_names=class_names,
-    use_camera_mask=False,  # SurroundOcc has no visibility mask.
-    # SDG-OCC Fig. 7 reports IoU by distance from the ego.
+    convention=occ_format, class_names=class_names, use_camera_mask=False,
     distance_ranges=[(0, 20), (20, 30), (30, 40), (40, 50)],
-    voxel_size=voxel_size,
-    point_cloud_range=point_cloud_range)
+    voxel_size=voxel_size, point_cloud_range=point_cloud_range)

@@ -6,6 +6,5 @@
 _base_ = ['../sdgocc-fusion_r50_4xb2-24e_occ3d-nus.py']
 
 model = dict(
-    view_transform=dict(use_sdg=False),
-    depth_net=dict(seg_channels=0),
+    view_transform=dict(use_sdg=False), depth_net=dict(seg_channels=0),
     loss_seg=None)
