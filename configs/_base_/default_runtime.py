@@ -30,8 +30,7 @@ custom_hooks = [
     # state saved in each checkpoint: a resumed run repeats an uninterrupted
     # one exactly (DropPath and dropout included).
     dict(type='AugmentationSeedHook'),
-    dict(type='RandomStateHook'),
-]
+    dict(type='RandomStateHook')]
 
 # Where the Runner's pictures and scalars go (also mmdet3d's
 # tools/misc/browse_dataset.py); for TensorBoard add

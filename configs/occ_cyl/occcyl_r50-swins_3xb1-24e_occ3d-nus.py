@@ -16,12 +16,10 @@ train_pipeline = [
     step for t in _base_.train_inputs + _base_._labels + _base_.train_targets +
     _base_._crop_and_pack for step in
     [dict(t, **_inputs.get(t['type'], {}), **_aug.get(t['type'], {}))] +
-    ([_base_.lineage_photometric] if t['type'] == 'MultiViewImageAug' else [])
-]
+    ([_base_.lineage_photometric] if t['type'] == 'MultiViewImageAug' else [])]
 test_pipeline = [
     dict(t, **_inputs.get(t['type'], {})) for t in _base_.test_inputs +
-    _base_._labels + _base_.test_targets + _base_._crop_and_pack
-]
+    _base_._labels + _base_.test_targets + _base_._crop_and_pack]
 train_dataloader = dict(
     dataset=dict(_base_._occ_dataset, pipeline=train_pipeline))
 val_dataloader = test_dataloader = dict(

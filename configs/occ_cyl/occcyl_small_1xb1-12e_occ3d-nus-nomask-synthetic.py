@@ -21,6 +21,5 @@ val_dataloader = test_dataloader = dict(
 # once (cache_gt_rays).
 val_evaluator = test_evaluator = [
     dict(_base_.val_evaluator, **_base_._occ_metric),
-    dict(_base_.ray_iou_metric, cache_gt_rays=True)
-]
+    dict(_base_.ray_iou_metric, cache_gt_rays=True)]
 default_hooks = dict(checkpoint=dict(interval=_base_.max_epochs))

@@ -12,11 +12,9 @@ _previous = dict(
     ego_box=_base_.ego_box, point_cloud_range=_base_.point_cloud_range)
 # Inserted just before PackOccInputs, as in the paper-size config.
 train_pipeline = _base_.train_pipeline[:-1] + [
-    _previous, _base_.train_pipeline[-1]
-]
+    _previous, _base_.train_pipeline[-1]]
 test_pipeline = _base_.test_pipeline[:-1] + [
-    _previous, _base_.test_pipeline[-1]
-]
+    _previous, _base_.test_pipeline[-1]]
 train_dataloader = dict(
     dataset=dict(num_frames=num_frames, pipeline=train_pipeline))
 val_dataloader = test_dataloader = dict(

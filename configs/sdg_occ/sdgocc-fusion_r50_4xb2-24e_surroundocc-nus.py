@@ -19,8 +19,7 @@ model = dict(
         loss_occ=dict(losses=[
             dict(type='OccFocalLoss', gamma=0.0, loss_weight=1.0),
             dict(type='SceneClassAffinityLoss', mode='geo'),
-            dict(type='SceneClassAffinityLoss', mode='sem'),
-        ])))
+            dict(type='SceneClassAffinityLoss', mode='sem')])))
 # The pipelines with the 2-D semantic targets of SDG's image branch.
 train_pipeline = (
     _base_.train_inputs_seg2d + _base_._labels + _base_.train_targets_seg2d +

@@ -8,5 +8,4 @@ _base_ = ['./_base_/sdgocc-fusion_small_occ3d-nus-synthetic.py',
 default_hooks = dict(checkpoint=dict(interval=_base_.max_epochs))
 model = dict(loss_mask_key=None)  # every voxel is supervised
 val_evaluator = test_evaluator = [
-    _base_.val_evaluator, dict(_base_.ray_iou_metric, cache_gt_rays=True)
-]
+    _base_.val_evaluator, dict(_base_.ray_iou_metric, cache_gt_rays=True)]

@@ -8,10 +8,8 @@
 #       --version v1.0-trainval
 data_root = 'data/nuscenes/'
 info_prefix = 'nuscenes_occ'
-cam_names = [
-    'CAM_FRONT', 'CAM_FRONT_RIGHT', 'CAM_FRONT_LEFT', 'CAM_BACK',
-    'CAM_BACK_LEFT', 'CAM_BACK_RIGHT'
-]
+cam_names = ['CAM_FRONT', 'CAM_FRONT_RIGHT', 'CAM_FRONT_LEFT', 'CAM_BACK',
+             'CAM_BACK_LEFT', 'CAM_BACK_RIGHT']
 img_size = (256, 704)  # network input (H, W): BEVDet's crop of 900x1600
 sweeps_num = 10  # nuScenes' usual 10 earlier sweeps (0.5 s at 20 Hz)
 dataset_type = 'NuScenesOccDataset'
@@ -23,9 +21,8 @@ backend_args = None
 ego_box = [-0.9, -1.1, -0.5, 3.7, 1.1, 2.2]
 # Points carry x, y, z, intensity, time lag (the files' ring index becomes
 # the time lag when the sweeps are merged).
-_key_frame = dict(
-    type='LoadOccPointsFromFile', coord_type='LIDAR', load_dim=5, use_dim=5,
-    backend_args=backend_args)
+_key_frame = dict(type='LoadOccPointsFromFile', coord_type='LIDAR',
+                  load_dim=5, use_dim=5, backend_args=backend_args)
 _remove_ego = dict(type='RemoveEgoPoints', ego_box=ego_box)
 # nuScenes-lidarseg point labels, for SDG-OCC's 2-D semantic targets only
 # (PointsToSemanticMaps): loaded where the info file has them, else those
@@ -36,9 +33,8 @@ _lidarseg = dict(
 _sweeps = dict(
     type='LoadOccPointsFromMultiSweeps', sweeps_num=sweeps_num, load_dim=5,
     use_dim=[0, 1, 2, 3, 4], ego_box=ego_box, backend_args=backend_args)
-_images = dict(
-    type='LoadMultiViewImagesOcc', cam_names=cam_names,
-    backend_args=backend_args)
+_images = dict(type='LoadMultiViewImagesOcc', cam_names=cam_names,
+               backend_args=backend_args)
 # Up to the occupancy labels: points, sweeps, images and (training) BEVDet's
 # image augmentation, +-6 % scale, random horizontal crop, flips and
 # +-5.4 deg rotation.
@@ -46,21 +42,16 @@ train_inputs = [
     _key_frame, _remove_ego, _sweeps, _images,
     dict(type='MultiViewImageAug', final_size=img_size,
          resize_range=(0.94, 1.06), crop_x_range=(0.0, 1.0),
-         crop_y_range=(1.0, 1.0), flip_prob=0.5, rot_range=(-5.4, 5.4))
-]
+         crop_y_range=(1.0, 1.0), flip_prob=0.5, rot_range=(-5.4, 5.4))]
 test_inputs = [
     _key_frame, _remove_ego, dict(_sweeps, test_mode=True), _images,
-    dict(type='MultiViewImageAug', final_size=img_size, test_mode=True)
-]
+    dict(type='MultiViewImageAug', final_size=img_size, test_mode=True)]
 # After the labels: BEV flips only (exact on the grid; other angles would
 # resample labels), then the depth and 2D semantic targets of the cameras.
-train_targets = [
-    dict(type='OccBEVAug', flip_x_prob=0.5, flip_y_prob=0.5),
-    dict(type='PointsToDepthMaps')
-]
-test_targets = [
-    dict(type='OccBEVAug', test_mode=True), dict(type='PointsToDepthMaps')
-]
+train_targets = [dict(type='OccBEVAug', flip_x_prob=0.5, flip_y_prob=0.5),
+                 dict(type='PointsToDepthMaps')]
+test_targets = [dict(type='OccBEVAug', test_mode=True),
+                dict(type='PointsToDepthMaps')]
 # The same with SDG-OCC's 2-D semantic targets (the lidarseg labels are
 # loaded before the ego points go, so that they stay aligned).
 train_inputs_seg2d = [_key_frame, _lidarseg] + train_inputs[1:]
@@ -75,9 +66,8 @@ test_targets_seg2d = test_targets + [dict(type='PointsToSemanticMaps')]
 # and a cold disk; pinned memory lets the copy to the GPU run async.
 _loader = dict(
     batch_size=1, num_workers=4, persistent_workers=True, pin_memory=True)
-_dataset = dict(
-    type=dataset_type, data_root=data_root, cam_names=cam_names,
-    backend_args=backend_args)
+_dataset = dict(type=dataset_type, data_root=data_root, cam_names=cam_names,
+                backend_args=backend_args)
 train_dataloader = dict(
     _loader, sampler=dict(type='DefaultSampler', shuffle=True),
     dataset=dict(

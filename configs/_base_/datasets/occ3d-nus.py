@@ -14,8 +14,7 @@ train_pipeline, test_pipeline, train_pipeline_seg2d, test_pipeline_seg2d = [
                             (_base_.train_inputs_seg2d,
                              _base_.train_targets_seg2d),
                             (_base_.test_inputs_seg2d,
-                             _base_.test_targets_seg2d)]
-]
+                             _base_.test_targets_seg2d)]]
 train_dataloader = dict(
     dataset=dict(_base_._occ_dataset, pipeline=train_pipeline))
 val_dataloader = test_dataloader = dict(

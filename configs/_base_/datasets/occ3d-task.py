@@ -14,8 +14,7 @@ class_names = [
     'others', 'barrier', 'bicycle', 'bus', 'car', 'construction_vehicle',
     'motorcycle', 'pedestrian', 'traffic_cone', 'trailer', 'truck',
     'driveable_surface', 'other_flat', 'sidewalk', 'terrain', 'manmade',
-    'vegetation', 'free'
-]
+    'vegetation', 'free']
 num_classes = len(class_names)
 empty_index = class_names.index('free')
 # What every model config on this dataset merges into its `model` (the task
@@ -31,12 +30,10 @@ _labels = [
     dict(type='LoadOccupancyGT', occ_format=occ_format),
     # Occ3D labels are in the ego frame: move points and cameras there, so
     # the ego frame is the working frame of everything after this step.
-    dict(type='PointsToEgoFrame'),
-]
+    dict(type='PointsToEgoFrame')]
 _crop_and_pack = [
     dict(type='PointsRangeFilter', point_cloud_range=point_cloud_range),
-    dict(type='PackOccInputs'),
-]
+    dict(type='PackOccInputs')]
 _occ_dataset = dict(occ_format=occ_format, metainfo=dict(classes=class_names))
 # Merged into nus-occ-common.py's OccupancyMetric: Occ3D's protocol counts
 # only the voxels a camera sees; SDG-OCC Fig. 7 reports IoU by distance

@@ -14,14 +14,12 @@ class_names = [
     'empty', 'barrier', 'bicycle', 'bus', 'car', 'construction_vehicle',
     'motorcycle', 'pedestrian', 'traffic_cone', 'trailer', 'truck',
     'driveable_surface', 'other_flat', 'sidewalk', 'terrain', 'manmade',
-    'vegetation'
-]
+    'vegetation']
 num_classes = len(class_names)
 empty_index = class_names.index('empty')
 # What every model config on this dataset merges into its `model` (the task
-# arguments of the occupancy detectors): the grid, the classes and the
-# empty label. SurroundOcc has no visibility mask: every voxel is
-# supervised.
+# arguments of the occupancy detectors): the grid, the classes and the empty
+# label. SurroundOcc has no visibility mask: every voxel is supervised.
 occ_task = dict(
     point_cloud_range=point_cloud_range, voxel_size=voxel_size,
     num_classes=num_classes, empty_index=empty_index)
@@ -29,8 +27,7 @@ occ_task = dict(
 _labels = [dict(type='LoadOccupancyGT', occ_format=occ_format)]
 _crop_and_pack = [
     dict(type='PointsRangeFilter', point_cloud_range=point_cloud_range),
-    dict(type='PackOccInputs'),
-]
+    dict(type='PackOccInputs')]
 _occ_dataset = dict(occ_format=occ_format, metainfo=dict(classes=class_names))
 # Merged into nus-occ-common.py's OccupancyMetric: no visibility mask;
 # SDG-OCC Fig. 7 reports IoU by distance from the ego.

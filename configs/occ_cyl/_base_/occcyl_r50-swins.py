@@ -44,14 +44,14 @@ model = dict(
     # the azimuth exactly; the counts stay within 5 %.
     cylinder=dict(shape=[480, 368, 32], radius='inscribed', clamp=True),
     # Pretrained weights (docs/train_test.md). The paper starts the ResNet-50
-    # from FCOS3D, whose released weights (a caffe-style ResNet-101-DCN) do
-    # not fit: the nearest public start is torchvision's ImageNet ResNet-50,
-    # stage 1 and BN statistics frozen as in FCOS3D / mmdet fine-tuning, the
-    # DCN offsets at zero as in mmdet's mdconv configs. The paper does not
-    # say how its Swin starts; PointOcc's starts from ImageNet, and so does
-    # this one, but for the RGB 4 x 4 patch embedding (ours takes 128
-    # channels in 2 x 2 patches). checkpoint=None trains from scratch (then
-    # frozen_stages=-1, norm_eval=False for the ResNet).
+    # from FCOS3D, whose released caffe-style ResNet-101-DCN does not fit:
+    # the nearest public start is torchvision's ImageNet ResNet-50, stage 1
+    # and BN statistics frozen as in FCOS3D / mmdet fine-tuning, DCN offsets
+    # at zero as in mmdet's mdconv configs. The paper does not say how its
+    # Swin starts; PointOcc's starts from ImageNet, and so does this one but
+    # for the RGB 4 x 4 patch embedding (ours takes 128 channels in 2 x 2
+    # patches). checkpoint=None trains from scratch (then frozen_stages=-1,
+    # norm_eval=False for the ResNet).
     pretrained=dict(
         img_backbone=dict(
             module='img_encoder.backbone', style='pytorch',
@@ -62,12 +62,11 @@ model = dict(
             module='tpv_encoder.backbone',
             checkpoint=('https://github.com/SwinTransformer/storage/releases/'
                         'download/v1.0.0/swin_small_patch4_window7_224.pth'),
-            ignore=[
-                r'^patch_embed\.projection\.',  # RGB 4 x 4 patches
-                r'^norm\.',  # the classifier's final norm
-                r'\.attn_mask$',  # precomputed; mmdet builds its own
-            ],
-            allow_missing=[r'^norm[0-3]\.'])),  # per-level output norms
+            # RGB 4 x 4 patches, the classifier's final norm, the precomputed
+            # attention masks (mmdet builds its own); per-level output norms.
+            ignore=[r'^patch_embed\.projection\.', r'^norm\.',
+                    r'\.attn_mask$'],
+            allow_missing=[r'^norm[0-3]\.'])),
     img_encoder=dict(
         type='MultiViewImageEncoder',
         backbone=dict(
@@ -82,18 +81,15 @@ model = dict(
             # ResNet-50 and OCCFusion, its lineage, uses them there (+0.75 M
             # parameters); in a float32 island, as mmcv's kernels have no
             # bfloat16 (projects/occ_common/models/layers/float32_dcn.py).
-            dcn=dict(
-                type='Float32DCNv2', deform_groups=1,
-                fallback_on_stride=False),
+            dcn=dict(type='Float32DCNv2', deform_groups=1,
+                     fallback_on_stride=False),
             stage_with_dcn=(False, False, True, True),
             # Recompute each bottleneck in the backward (not in the paper)
             # so that a 6 x 928 x 1600 iteration fits in memory; exact, as
             # no BatchNorm statistic updates twice.
-            with_cp=True,
-            init_cfg=None),  # weights: `pretrained` above
-        neck=dict(
-            type='mmdet.FPN', in_channels=[256, 512, 1024, 2048],
-            out_channels=_img_channels, num_outs=4),
+            with_cp=True, init_cfg=None),  # weights: `pretrained` above
+        neck=dict(type='mmdet.FPN', in_channels=[256, 512, 1024, 2048],
+                  out_channels=_img_channels, num_outs=4),
         neck_channels=_img_channels, num_levels=4, out_channels=_v_channels,
         out_stride=_img_stride,
         with_cp=True),  # recompute the FPN in the backward, as the ResNet
@@ -118,10 +114,9 @@ model = dict(
         type='TPVPolarFusion', cam_channels=_context_channels,
         lidar_channels=_point_channels, plane_channels=_plane_channels,
         num_groups=8,  # M of the spatial group pooling (paper, Table VII)
-        fused_lift=True,
         # Recompute the group pooling and its MLPs in the backward (~1.9
         # GiB kept otherwise at the Table VI cylinder): for memory, exact.
-        with_cp=True),
+        fused_lift=True, with_cp=True),
     tpv_encoder=dict(
         type='TPVPlaneEncoder',
         backbone=dict(
@@ -136,40 +131,33 @@ model = dict(
             drop_path_rate=0.3,  # Swin-S's (Swin paper, mmdet configs)
             # Recompute each block in the backward, for memory; exact (the
             # drop-path masks are redrawn from the saved random state).
-            with_cp=True,
-            init_cfg=None),  # weights: `pretrained` above
-        neck=dict(
-            type='mmdet.FPN', in_channels=_swin_dims,
-            out_channels=_plane_channels, num_outs=_num_scales)),
+            with_cp=True, init_cfg=None),  # weights: `pretrained` above
+        neck=dict(type='mmdet.FPN', in_channels=_swin_dims,
+                  out_channels=_plane_channels, num_outs=_num_scales)),
     occ_head=dict(
         type='CylindricalOccHead', in_channels=_plane_channels,
         num_scales=_num_scales, hidden_channels=_plane_channels,
         with_cp=True,  # recompute the 640k-voxel MLP in the backward
         # Eq. 18 over the four scales; the labels come from the detector.
-        loss_occ=dict(
-            type='MultiScaleOccupancyLoss',
-            losses=[
-                dict(type='OccFocalLoss'), dict(type='OccLovaszLoss'),
-                dict(type='SceneClassAffinityLoss', mode='geo'),
-                dict(type='SceneClassAffinityLoss', mode='sem')
-            ])),
+        loss_occ=dict(type='MultiScaleOccupancyLoss', losses=[
+            dict(type='OccFocalLoss'), dict(type='OccLovaszLoss'),
+            dict(type='SceneClassAffinityLoss', mode='geo'),
+            dict(type='SceneClassAffinityLoss', mode='sem')])),
     # Eq. 19: lambda = 3. The paper places bin k at 1 + k d metres but does
     # not say which LiDAR depths train it: BEVDepth's floor would lift every
     # depth half a bin too close on average, so each trains its nearest bin
     # (small config, 2.5 m bins: 58.64 / 16.39 against 59.01 / 15.30 with
     # floor; bins lifted at their centres instead 59.94 / 16.79).
-    loss_depth=dict(
-        type='DepthBCELoss', downsample=_img_stride, loss_weight=3.0,
-        nearest_bin=True))
+    loss_depth=dict(type='DepthBCELoss', downsample=_img_stride,
+                    loss_weight=3.0, nearest_bin=True))
 
 # Schedule: AdamW lr 5e-5, weight decay 0.01, multistep decay (paper). Epochs
 # and milestones are not given (the lineage decays with a cosine): x0.1 at
 # 20 and 23 of 24 is mmdet3d's usual multistep shape. The pretrained image
 # backbone learns at a tenth of the rate, as in SurroundOcc and OCCFusion.
 max_epochs = 24
-train_cfg = dict(
-    type='EpochBasedTrainLoop', max_epochs=max_epochs,
-    val_interval=max_epochs)
+train_cfg = dict(type='EpochBasedTrainLoop', max_epochs=max_epochs,
+                 val_interval=max_epochs)
 val_cfg, test_cfg = dict(type='ValLoop'), dict(type='TestLoop')
 optim_wrapper = dict(
     type='OptimWrapper',
@@ -181,8 +169,7 @@ param_scheduler = [
     dict(type='LinearLR', start_factor=1.0 / 3, by_epoch=False, begin=0,
          end=500),
     dict(type='MultiStepLR', by_epoch=True, begin=0, end=max_epochs,
-         milestones=[20, 23], gamma=0.1)
-]
+         milestones=[20, 23], gamma=0.1)]
 auto_scale_lr = dict(enable=False, base_batch_size=3)  # 3 GPUs x 1 (paper)
 
 # Inputs, which the paper configs apply to the dataset base's pipelines:

@@ -22,9 +22,8 @@ model = dict(
     # into 5.6-degree wedges): 61.7 / 12.2 against 53.3 / 10.0.
     cylinder=dict(shape=[64, 128, 16]),
     # No download: trained from scratch, so nothing frozen.
-    pretrained=dict(
-        img_backbone=dict(checkpoint=None),
-        tpv_backbone=dict(checkpoint=None)),
+    pretrained=dict(img_backbone=dict(checkpoint=None),
+                    tpv_backbone=dict(checkpoint=None)),
     img_encoder=dict(
         backbone=dict(
             depth=18, base_channels=16, frozen_stages=-1, norm_eval=False,
@@ -76,16 +75,13 @@ img_size = (192, 320)
 # turns and photometric distortion did not help either. The configs put
 # their label format's steps between these pieces.
 _larger = dict(MultiViewImageAug=dict(final_size=img_size))
-_small_train_inputs = [
-    dict(t, **_larger.get(t['type'], {})) for t in _base_.train_inputs
-]
-_small_test_inputs = [
-    dict(t, **_larger.get(t['type'], {})) for t in _base_.test_inputs
-]
+_small_train_inputs = [dict(t, **_larger.get(t['type'], {}))
+                       for t in _base_.train_inputs]
+_small_test_inputs = [dict(t, **_larger.get(t['type'], {}))
+                      for t in _base_.test_inputs]
 _small_train_targets = [
     dict(t, flip_x_prob=0.0, flip_y_prob=0.0) if t['type'] == 'OccBEVAug'
-    else t for t in _base_.train_targets
-]
+    else t for t in _base_.train_targets]
 data_root = _base_._synthetic_root
 train_dataloader = val_dataloader = test_dataloader = dict(
     **_base_._synthetic_loader, dataset=dict(data_root=data_root))
@@ -98,14 +94,9 @@ train_cfg = dict(max_epochs=max_epochs, val_interval=max_epochs)
 # 35.20 (two seeds) against 71.26 / 34.62 and 72.17 / 33.26 at 2e-3; 8e-3
 # went unstable. From scratch, the image backbone learns at the full rate
 # (the base's lr_mult 0.1 is for pretrained weights).
-optim_wrapper = dict(
-    optimizer=dict(lr=4e-3),
-    paramwise_cfg=dict(
-        custom_keys={'img_encoder.backbone': dict(lr_mult=1.0)}))
+optim_wrapper = dict(optimizer=dict(lr=4e-3), paramwise_cfg=dict(
+    custom_keys={'img_encoder.backbone': dict(lr_mult=1.0)}))
 param_scheduler = [
-    dict(type='LinearLR', start_factor=0.1, by_epoch=False, begin=0,
-         end=50),
-    dict(type='CosineAnnealingLR', by_epoch=True, begin=0,
-         T_max=max_epochs, end=max_epochs, eta_min=0.0,
-         convert_to_iter_based=True),
-]
+    dict(type='LinearLR', start_factor=0.1, by_epoch=False, begin=0, end=50),
+    dict(type='CosineAnnealingLR', by_epoch=True, begin=0, T_max=max_epochs,
+         end=max_epochs, eta_min=0.0, convert_to_iter_based=True)]

@@ -21,8 +21,7 @@ _img_channels = _bev_channels = 256
 _cam_channels, _lidar_channels = 64, 128
 
 model = dict(
-    type='SDGOcc',
-    variant='fusion',
+    type='SDGOcc', variant='fusion',
     # ImageNet statistics, matching the pretrained backbone.
     data_preprocessor=dict(
         type='Det3DDataPreprocessor', mean=[123.675, 116.28, 103.53],
@@ -39,25 +38,21 @@ model = dict(
         # the paper, exact): a 6x256x704 iteration with 10 sweeps peaks at
         # 3.8 GB instead of 6.0 GB for ~10 % more time
         # (tools/analysis_tools/benchmark.py --train --synthetic-batch).
-        with_cp=True,
-        init_cfg=None),  # weights: `pretrained` below
+        with_cp=True, init_cfg=None),  # weights: `pretrained` below
     # ImageNet weights, as BEVDet-Occ, loaded and checked without torchvision
     # (docs/train_test.md); checkpoint=None trains from scratch.
-    pretrained=dict(
-        img_backbone=dict(
-            module='img_backbone', checkpoint='torchvision://resnet50',
-            style='pytorch', ignore=[r'^fc\.'])),  # the ImageNet classifier
+    pretrained=dict(img_backbone=dict(
+        module='img_backbone', checkpoint='torchvision://resnet50',
+        style='pytorch', ignore=[r'^fc\.'])),  # the ImageNet classifier
     # The FPN over the 1/16 and 1/32 stages, "down-sampled to 1/16"
     # (Sec. 3.3): mmdet's FPN without the 1/32 output convolution, which
     # nothing reads and whose unused weights DDP refuses.
-    img_neck=dict(
-        type='SelectiveFPN', in_channels=[1024, 2048],
-        out_channels=_img_channels, out_indices=(0, )),
+    img_neck=dict(type='SelectiveFPN', in_channels=[1024, 2048],
+                  out_channels=_img_channels, out_indices=(0, )),
     depth_net=dict(
         type='DepthNet', in_channels=_img_channels, mid_channels=_img_channels,
-        context_channels=_cam_channels,
         # SDG-OCC's context is the plain texture branch (no eq. 5 terms).
-        with_depth_feature=False,
+        context_channels=_cam_channels, with_depth_feature=False,
         camera_param_dims=22,  # BEVDepth's camera-aware depth, as BEVDet
         seg_channels=_num_seg_classes, with_cp=True),
     view_transform=dict(
@@ -73,11 +68,10 @@ model = dict(
         # SDG-OCC's 0.1 m voxels; two stride-2 stages reach Occ3D's 0.4 m
         # BEV cell.
         voxel_size=[0.1, 0.1, 0.1], stage_strides=(2, 2),
-        out_channels=_lidar_channels,
+        out_channels=_lidar_channels, with_cp=True,
         # "Voxelization and normalization" (Sec. 3.5): each point's offsets
         # to its voxel's mean and centre, as in the authors' code.
-        point_offsets=True,
-        with_cp=True),
+        point_offsets=True),
     fusion=dict(
         type='NeighborhoodFusion',
         # The widths come from the detector: camera BEV queries, LiDAR BEV
@@ -89,9 +83,8 @@ model = dict(
     bev_encoder=dict(
         type='SDGBEVEncoder', in_channels=_cam_channels,
         # BEVDet's CustomResNet widths (2x, 4x, 8x the camera BEV).
-        stage_channels=[
-            _cam_channels * 2, _cam_channels * 4, _cam_channels * 8
-        ],
+        stage_channels=[_cam_channels * 2, _cam_channels * 4,
+                        _cam_channels * 8],
         num_blocks=[2, 2, 2],  # BEVDet's two residual blocks per stage
         out_channels=_bev_channels),
     occ_head=dict(
@@ -100,18 +93,14 @@ model = dict(
         num_convs=1,  # FlashOcc's single 3x3 conv before the predictor
         # FlashOcc's masked cross-entropy on Occ3D (focal with gamma = 0);
         # add OccLovaszLoss / SceneClassAffinityLoss entries to use them.
-        loss_occ=dict(
-            type='OccupancyLoss',
-            losses=[dict(type='OccFocalLoss', gamma=0.0, loss_weight=1.0)])),
-    loss_depth=dict(
-        type='DepthBCELoss', downsample=_img_stride,
-        # The paper gives no weight; 0.05 is the authors' partial release's
-        # (BEVDet-Occ's), not a value of the paper.
-        loss_weight=0.05),
-    loss_seg=dict(
-        type='mmdet.CrossEntropyLoss', ignore_index=255, avg_non_ignore=True,
-        # The paper gives no weight; 0.5 is the authors' release's.
-        loss_weight=0.5))
+        loss_occ=dict(type='OccupancyLoss', losses=[
+            dict(type='OccFocalLoss', gamma=0.0, loss_weight=1.0)])),
+    # The paper gives neither loss weight; 0.05 (depth) is the authors'
+    # partial release's (BEVDet-Occ's), 0.5 (2D semantics) the release's.
+    loss_depth=dict(type='DepthBCELoss', downsample=_img_stride,
+                    loss_weight=0.05),
+    loss_seg=dict(type='mmdet.CrossEntropyLoss', ignore_index=255,
+                  avg_non_ignore=True, loss_weight=0.5))
 
 # Depth bins per label grid (min, max, step in metres; not given by the
 # paper), which the dataset configs merge into `model`: on Occ3D those of
@@ -121,17 +110,16 @@ model = dict(
 depth_bounds = dict(occ3d=[1.0, 45.0, 0.5], surroundocc=[1.0, 60.0, 0.5])
 
 # SDG-KL: SDG-Fusion's network trained with a LiDAR-dominant fusion (LiDAR
-# queries, camera keys / values; the detector swaps the widths) as a
-# teacher and FOAD distillation into the camera BEV; inference skips the
-# SPVCNN branch and the fusion. The *sdgocc-kl_* configs merge it into
-# `model`.
+# queries, camera keys / values; the detector swaps the widths) as a teacher
+# and FOAD distillation into the camera BEV; inference skips the SPVCNN branch
+# and the fusion. The *sdgocc-kl_* configs merge it into `model`.
 kl_model = dict(
     variant='kl',
     # alpha, beta and the loss weight are not fixed by the paper: the
     # N_AR / N_IR balance already equalises the two regions, so both
     # regions start at weight 1.
-    loss_distill=dict(
-        type='FOADDistillLoss', alpha=1.0, beta=1.0, loss_weight=1.0),
+    loss_distill=dict(type='FOADDistillLoss', alpha=1.0, beta=1.0,
+                      loss_weight=1.0),
     # The teacher must learn occupancy for its features to be worth
     # distilling; it gets the same weight as the student's head.
     teacher_loss_weight=1.0,
@@ -152,26 +140,22 @@ camera_lss_model = dict(
     camera_sdg_model, view_transform=dict(use_sdg=False),
     depth_net=dict(seg_channels=0), loss_seg=None)
 
-# Schedule: AdamW lr 1e-4 with gradient clipping (paper); weight decay,
-# clip norm, warm-up and 24 epochs follow BEVDet-Occ / FlashOcc; 4 GPUs x 2
-# samples is an assumption, hence auto_scale_lr (off unless tools/train.py
-# --auto-scale-lr, mmdet3d's convention; the paper's rate is one RTX
-# 4090's). Differences from the authors' partial release, kept as no config
-# had been trained on nuScenes to compare them (commit 41311d5): 24 epochs
-# (release: 48, 36 with 4D stereo), clip norm 5 (release: 2), no EMA (add
-# mmdet's EMAHook to custom_hooks), the key frame plus 10 sweeps (release:
-# the key frame only).
+# Schedule: AdamW lr 1e-4 with gradient clipping (paper); weight decay, clip
+# norm, warm-up and 24 epochs follow BEVDet-Occ / FlashOcc; 4 GPUs x 2 samples
+# is an assumption, hence auto_scale_lr (off unless tools/train.py
+# --auto-scale-lr, mmdet3d's convention; the paper's rate is one RTX 4090's).
+# Differences from the authors' partial release, kept as no config had been
+# trained on nuScenes to compare them (commit 41311d5): 24 epochs (release: 48,
+# 36 with 4D stereo), clip norm 5 (release: 2), no EMA (add mmdet's EMAHook to
+# custom_hooks), the key frame plus 10 sweeps (release: the key frame only).
 max_epochs = 24
-train_cfg = dict(
-    type='EpochBasedTrainLoop', max_epochs=max_epochs,
-    val_interval=max_epochs)
+train_cfg = dict(type='EpochBasedTrainLoop', max_epochs=max_epochs,
+                 val_interval=max_epochs)
 val_cfg, test_cfg = dict(type='ValLoop'), dict(type='TestLoop')
 optim_wrapper = dict(
     type='OptimWrapper',
     optimizer=dict(type='AdamW', lr=1e-4, weight_decay=1e-2),
     clip_grad=dict(max_norm=5, norm_type=2))
-param_scheduler = [
-    dict(type='LinearLR', start_factor=1e-3, by_epoch=False, begin=0,
-         end=200)
-]
+param_scheduler = [dict(type='LinearLR', start_factor=1e-3, by_epoch=False,
+                        begin=0, end=200)]
 auto_scale_lr = dict(enable=False, base_batch_size=8)

@@ -43,9 +43,6 @@ train_cfg = dict(max_epochs=max_epochs, val_interval=max_epochs)
 # over the run: +2 mIoU over a constant rate at the same budget.
 optim_wrapper = _base_.tiny_optim_wrapper
 param_scheduler = [
-    dict(type='LinearLR', start_factor=0.1, by_epoch=False, begin=0,
-         end=50),
-    dict(type='CosineAnnealingLR', by_epoch=True, begin=0,
-         T_max=max_epochs, end=max_epochs, eta_min=0.0,
-         convert_to_iter_based=True),
-]
+    dict(type='LinearLR', start_factor=0.1, by_epoch=False, begin=0, end=50),
+    dict(type='CosineAnnealingLR', by_epoch=True, begin=0, T_max=max_epochs,
+         end=max_epochs, eta_min=0.0, convert_to_iter_based=True)]

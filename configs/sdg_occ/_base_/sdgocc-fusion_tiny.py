@@ -42,10 +42,8 @@ tiny_model = dict(
             dict(type='OccFocalLoss', gamma=0.0),
             dict(type='OccLovaszLoss'),
             dict(type='SceneClassAffinityLoss', mode='geo'),
-            dict(type='SceneClassAffinityLoss', mode='sem'),
-        ])))
-# 1 m depth bins (the full configs use 0.5 m) halve the LSS fallback's
-# points.
+            dict(type='SceneClassAffinityLoss', mode='sem')])))
+# 1 m depth bins (the full configs use 0.5 m) halve the LSS fallback's points.
 tiny_depth_step = 1.0
 tiny_img_size = (128, 352)  # half the paper's 256x704 per side
 # lr 2e-3 (20x the paper's): a from-scratch tiny model on a few samples.

@@ -12,10 +12,8 @@ model = _base_.camera_lss_model
 
 _no_points = dict(LoadPreviousKeyFrames=dict(load_points=False))
 train_pipeline = [
-    dict(t, **_no_points.get(t['type'], {})) for t in _base_.train_pipeline
-]
+    dict(t, **_no_points.get(t['type'], {})) for t in _base_.train_pipeline]
 test_pipeline = [
-    dict(t, **_no_points.get(t['type'], {})) for t in _base_.test_pipeline
-]
+    dict(t, **_no_points.get(t['type'], {})) for t in _base_.test_pipeline]
 train_dataloader = dict(dataset=dict(pipeline=train_pipeline))
 val_dataloader = test_dataloader = dict(dataset=dict(pipeline=test_pipeline))
