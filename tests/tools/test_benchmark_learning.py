@@ -271,8 +271,7 @@ def test_weak_classes_name_where_their_voxels_went(tmp_path):
     assert _tool()._weak_class_confusions(row) == 'none'
 
 
-_CAMERA_OFF = dict(variant='camera', lidar_encoder=None, fusion=None,
-                   loss_seg=None)
+_CAMERA_OFF = dict(lidar_encoder=None, fusion=None, loss_seg=None)
 
 
 @pytest.mark.parametrize('name, expect', [
@@ -285,7 +284,7 @@ _CAMERA_OFF = dict(variant='camera', lidar_encoder=None, fusion=None,
     ('sdg-camera-lss-tiny', _CAMERA_OFF),
     ('sdg-camera-lss-small', _CAMERA_OFF),
     ('sdg-camera-sdg-small',
-     dict(variant='camera', lidar_encoder=None, fusion=None)),
+     dict(lidar_encoder=None, fusion=None)),
     ('sdg-kl-small-sharedhead', dict(separate_teacher_head=False)),
     ('sdg-kl-small-sharedhead-detachcam',
      dict(separate_teacher_head=False, detach_teacher_camera=True)),

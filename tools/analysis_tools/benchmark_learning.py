@@ -58,15 +58,13 @@ from projects.occ_common.evaluation import (largest_confusions,
 #: an SDG-Fusion config (the deltas of configs/sdg_occ/ablations/
 #: sdgocc-camera-lss_*).
 _CAMERA_LSS = [
-    'model.variant=camera', 'model.lidar_encoder=None', 'model.fusion=None',
+    'model.lidar_encoder=None', 'model.fusion=None',
     'model.view_transform.use_sdg=False', 'model.depth_net.seg_channels=0',
     'model.loss_seg=None'
 ]
 #: SDG-OCC Table 3's "+SDG" row (configs/sdg_occ/ablations/
 #: sdgocc-camera-sdg_*): the SDG lift without the LiDAR branch.
-_CAMERA_SDG = [
-    'model.variant=camera', 'model.lidar_encoder=None', 'model.fusion=None'
-]
+_CAMERA_SDG = ['model.lidar_encoder=None', 'model.fusion=None']
 #: Named runs: name -> (config, extra --cfg-options).
 RUNS = {
     'occcyl-tiny': ('configs/occ_cyl/'

@@ -21,7 +21,7 @@ _img_channels = _bev_channels = 256
 _cam_channels, _lidar_channels = 64, 128
 
 model = dict(
-    type='SDGOcc', variant='fusion',
+    type='SDGOcc',
     # ImageNet statistics, matching the pretrained backbone.
     data_preprocessor=dict(
         type='Det3DDataPreprocessor', mean=[123.675, 116.28, 103.53],
@@ -112,9 +112,10 @@ depth_bounds = dict(occ3d=[1.0, 45.0, 0.5], surroundocc=[1.0, 60.0, 0.5])
 # SDG-KL: SDG-Fusion's network trained with a LiDAR-dominant fusion (LiDAR
 # queries, camera keys / values; the detector swaps the widths) as a teacher
 # and FOAD distillation into the camera BEV; inference skips the SPVCNN branch
-# and the fusion. The *sdgocc-kl_* configs merge it into `model`.
+# and the fusion. The distillation loss makes the model SDG-KL (SDGOcc reads
+# its variant off its sub-modules). The *sdgocc-kl_* configs merge it into
+# `model`.
 kl_model = dict(
-    variant='kl',
     # alpha, beta and the loss weight are not fixed by the paper: the
     # N_AR / N_IR balance already equalises the two regions, so both
     # regions start at weight 1.
@@ -135,7 +136,7 @@ kl_model = dict(
 # it); the Baseline is the plain LSS lift, without which nothing uses the
 # 2D semantics, so no semantic head or loss_seg (FlashOcc has none); depth
 # supervision stays (FlashOcc's BEVDepth-style DepthNet has it).
-camera_sdg_model = dict(variant='camera', lidar_encoder=None, fusion=None)
+camera_sdg_model = dict(lidar_encoder=None, fusion=None)
 camera_lss_model = dict(
     camera_sdg_model, view_transform=dict(use_sdg=False),
     depth_net=dict(seg_channels=0), loss_seg=None)
