@@ -144,6 +144,7 @@ def _convert_mmdet3d_sample(infos: dict, index: int, info_file: str,
     os.makedirs(out_dir, exist_ok=True)
     target = osp.join(out_dir, f'{info["token"]}_info.pkl')
     write_info_file(target, [info], version, 'demo', synthetic=False,
+                    cameras=tuple(info['images']),
                     extended_from=osp.basename(info_file),
                     mmdet3d_info_version=meta.get('info_version'))
     return target
