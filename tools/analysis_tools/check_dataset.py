@@ -70,7 +70,12 @@ def main(argv=None):
     return report
 
 
+def exit_status(report) -> int:
+    """1 when a check failed, else 0 (warnings pass)."""
+    from projects.occ_common.analysis.dataset_doctor import FAIL
+    return 1 if report.verdict == FAIL else 0
+
+
 if __name__ == '__main__':
     with cfg_errors_exit():
-        from projects.occ_common.analysis.dataset_doctor import FAIL
-        sys.exit(1 if main().verdict == FAIL else 0)
+        sys.exit(exit_status(main()))

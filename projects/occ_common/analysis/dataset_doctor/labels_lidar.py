@@ -96,23 +96,28 @@ class Reading:
                  shape) -> None:
         self.name, self.at, self.behind = name, at, behind
         size = np.asarray(shape)
-        self.inside = (np.all((at >= 0) & (at < size), axis=1)
-                       & np.all((behind >= 0) & (behind < size), axis=1))
+        self.inside = np.all((at >= 0) & (at < size), axis=1)
+        self._behind_inside = np.all((behind >= 0) & (behind < size),
+                                     axis=1)
 
     def on(self, voxels: np.ndarray) -> np.ndarray:
-        """Which inside points have their voxel, or the one behind, in
-        ``voxels`` (bool (X, Y, Z)). Shape (P_inside,)."""
-        return (voxels[tuple(self.at[self.inside].T)]
-                | voxels[tuple(self.behind[self.inside].T)])
+        """Which points have their voxel, or the one behind, in ``voxels``
+        (bool (X, Y, Z)); a point outside the grid is not. Shape (P,)."""
+        hit = np.zeros(len(self.at), bool)
+        hit[self.inside] = voxels[tuple(self.at[self.inside].T)]
+        behind = self.inside & self._behind_inside
+        hit[behind] |= voxels[tuple(self.behind[behind].T)]
+        return hit
 
     def shares(self, voxels: np.ndarray,
                subsets: Dict[str, np.ndarray]) -> Dict[str, float]:
-        """Per subset of points (bool (P,)), the share of its inside
-        points :meth:`on` ``voxels``."""
+        """Per subset of points (bool (P,)), the share :meth:`on`
+        ``voxels`` (NaN for an empty subset). The subsets are the points
+        in the grid as configured, so that a reading that moves points out
+        of the grid counts them as misses."""
         hit = self.on(voxels)
-        return {name: float(hit[subset[self.inside]].mean())
-                if subset[self.inside].any() else float('nan')
-                for name, subset in subsets.items()}
+        return {name: float(hit[subset].mean()) if subset.any()
+                else float('nan') for name, subset in subsets.items()}
 
 
 def _indices(points: np.ndarray, sensor: np.ndarray, low: np.ndarray,
@@ -248,15 +253,20 @@ def check_labels_vs_lidar(sample: SampleData,
                     'grid: too few to check the labels against')
         return result
     ground = np.percentile(xyz[inside, 2], 10)
-    subsets = dict(hit=np.ones(len(xyz), bool),
-                   hit_elevated=xyz[:, 2] > ground + ELEVATED_M)
+    subsets = dict(hit=inside,
+                   hit_elevated=inside & (xyz[:, 2] > ground + ELEVATED_M))
     surface = surface_voxels(grid.occupied(sample.labels))
     own = own_reading.shares(surface, subsets)
     result.numbers.update(own)
     scores = {r.name: r.shares(surface, subsets) for r in all_readings[1:]}
-    gains = {name: np.nanmax([score[k] - own[k] for k in own])
-             for name, score in scores.items()}
-    best = max(gains, key=gains.get)
+    # The largest gain on either set of points; among equal ones, the
+    # larger on both (a shift that keeps every point beats one that drops
+    # the lowest layer).
+    rank = {name: (np.nanmax(gain), np.nansum(gain)) for name, gain in (
+        (name, [score[k] - own[k] for k in own])
+        for name, score in scores.items())}
+    best = max(rank, key=rank.get)
+    gains = {name: value[0] for name, value in rank.items()}
     result.numbers['best_other.gain'] = float(gains[best])
     result.numbers['best_other.hit'] = scores[best]['hit']
     result.numbers['best_other.hit_elevated'] = scores[best][
@@ -285,17 +295,19 @@ def _per_class(result: CheckResult, lidarseg: np.ndarray,
                surface: np.ndarray) -> None:
     """``same_class`` overall and ``hit`` / ``same_class`` per lidarseg
     class (1..16, the classes both label formats share)."""
-    seg = lidarseg[reading.inside]
-    valid = (seg >= 1) & (seg <= len(OCC_CLASS_NAMES))
+    valid = reading.inside & (lidarseg >= 1) & (lidarseg <= len(
+        OCC_CLASS_NAMES))
     if not valid.any():
         return
-    at = tuple(reading.at[reading.inside][valid].T)
-    behind = tuple(reading.behind[reading.inside][valid].T)
-    same = (labels[at] == seg[valid]) | (labels[behind] == seg[valid])
+    seg = lidarseg[valid]
+    same = np.zeros(len(seg), bool)
+    for label in np.unique(seg):
+        of_label = seg == label
+        same[of_label] = reading.on(labels == label)[valid][of_label]
     hit = reading.on(surface)[valid]
     result.numbers['same_class'] = float(same.mean())
     for label, name in enumerate(OCC_CLASS_NAMES, start=1):
-        of_class = seg[valid] == label
+        of_class = seg == label
         if of_class.any():
             result.numbers[f'{name}.hit'] = float(hit[of_class].mean())
             result.numbers[f'{name}.same_class'] = float(

@@ -93,7 +93,7 @@ def check_masks(sample: SampleData, grid: LabelGrid) -> CheckResult:
     xyz, origin = grid_points(sample, grid)
     reading = configured_reading(xyz, origin, grid)
     if reading.inside.any():
-        share = float(reading.on(sample.mask_lidar).mean())
+        share = float(reading.on(sample.mask_lidar)[reading.inside].mean())
         result.numbers['points_in_lidar_mask'] = share
         result.judge(share, '{value:.2f} of the key frame\'s points lie in '
                      'mask_lidar (a mask of another frame, flipped or '
