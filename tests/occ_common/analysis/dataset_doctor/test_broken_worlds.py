@@ -66,8 +66,8 @@ def test_untouched_world_passes(converted_tiny_world, occ_format):
                if k.endswith('.extrinsic_deg')) < 1e-3
     sequence = report.summaries['sequence'].numbers
     # Timestamps of ~1.5e9 s carry float64 steps of ~2e-7 s.
-    assert sequence['max_sweep_gap_s']['max'] == pytest.approx(0.05,
-                                                              abs=1e-6)
+    gap = sequence['max_sweep_gap_s']['max']
+    assert gap == pytest.approx(0.05, abs=1e-6)
     assert report.summaries['class_histogram'].numbers['distance'][
         'mean'] < 0.2
     masks = report.summaries['masks']

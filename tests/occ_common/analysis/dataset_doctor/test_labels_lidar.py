@@ -14,8 +14,7 @@ from projects.occ_common.analysis.dataset_doctor.grid import (
     LabelGrid, grid_config_check, grid_from_config)
 from projects.occ_common.analysis.dataset_doctor.labels_lidar import (
     check_labels_vs_lidar, surface_voxels)
-from projects.occ_common.analysis.dataset_doctor.sample_data import \
-    SampleData
+from projects.occ_common.analysis.dataset_doctor.sample_data import SampleData
 from projects.occ_common.analysis.dataset_doctor.verdict import (FAIL, PASS,
                                                                  SKIP, WARN)
 from projects.occ_common.datasets.occ_formats import SURROUNDOCC_CLASS_NAMES

@@ -1,8 +1,11 @@
 """Verdicts: the worst finding wins, and summaries fold the samples."""
 import math
 
-from projects.occ_common.analysis.dataset_doctor.verdict import (
-    FAIL, PASS, SKIP, WARN, CheckResult, summarise, worst)
+from projects.occ_common.analysis.dataset_doctor.verdict import (FAIL, PASS,
+                                                                 SKIP, WARN,
+                                                                 CheckResult,
+                                                                 summarise,
+                                                                 worst)
 
 
 def test_worst_orders_fail_warn_pass_skip():
