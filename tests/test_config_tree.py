@@ -26,7 +26,11 @@ ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
 CONFIGS = sorted(
     glob.glob(osp.join(ROOT, 'configs', '**', '*.py'), recursive=True))
 MAX_DEPTH = 3  # files: the config plus two generations of _base_ files
-MAX_LINES = 1500  # all config .py files together
+# All config .py files together: 1,500 when the tree was flattened, plus
+# the four-camera rig's two configs and their data (2026-12): OccCylindrical's
+# leaves are all three files deep, so its rig config restates the small
+# leaf's pipeline assembly instead of inheriting a leaf.
+MAX_LINES = 1520
 
 
 def _bases(path):

@@ -19,9 +19,8 @@ backend_args = None
 # margin (projects/occ_common/transforms/ego_points.py): its own returns (a
 # quarter of a key frame, in voxels labelled empty) go from every sweep.
 ego_box = [-0.9, -1.1, -0.5, 3.7, 1.1, 2.2]
-# Points carry x, y, z, intensity, time lag: the files' values per point
-# come from the info file (load_dim=None: nuScenes' 5, 4 without the ring
-# index, which is never used) and the sweep merge appends the time lag.
+# Points carry x, y, z, intensity (load_dim=None: the info file's values
+# per point, nuScenes' 5 or 4 without ring index), then the time lag.
 _key_frame = dict(type='LoadOccPointsFromFile', coord_type='LIDAR',
                   load_dim=None, use_dim=4, backend_args=backend_args)
 _remove_ego = dict(type='RemoveEgoPoints', ego_box=ego_box)
@@ -33,9 +32,7 @@ _lidarseg = dict(
 # The box, not mmdet3d's remove_close (a 1 m sphere that misses the bonnet).
 _sweeps = dict(
     type='LoadOccPointsFromMultiSweeps', sweeps_num=sweeps_num,
-    load_dim=None, use_dim=[0, 1, 2, 3, 4], ego_box=ego_box,
-    backend_args=backend_args)
-# The views the dataset keeps (its cam_names), in its order.
+    load_dim=None, ego_box=ego_box, backend_args=backend_args)
 _images = dict(type='LoadMultiViewImagesOcc', backend_args=backend_args)
 # Up to the occupancy labels: points, sweeps, images and (training) BEVDet's
 # image augmentation, +-6 % scale, random horizontal crop, flips and
@@ -103,3 +100,6 @@ ray_iou_metric = dict(
 _synthetic_root = 'data/nuscenes_synthetic/'
 _synthetic_loader = dict(
     num_workers=0, persistent_workers=False, pin_memory=False)
+# Its four-camera rig (create_synthetic_nuscenes.py --camera-rig quad ...)
+_quad = dict(data_root='data/nuscenes_synthetic_quad/',
+             cam_names=['CAM_FRONT', 'CAM_LEFT', 'CAM_BACK', 'CAM_RIGHT'])
