@@ -79,6 +79,39 @@ def test_real_sample_passes_the_label_free_checks(real_info, tmp_path):
     assert saved['samples'][0]['token'] == 'ca9a282c9e77460f8360f564131a8af5'
 
 
+def test_real_images_swapped_fail_the_calibration(real_info):
+    """The real frame with CAM_FRONT's and CAM_BACK's images exchanged:
+    the pairs with either camera disagree (rank correlation -0.69 for
+    CAM_FRONT|CAM_FRONT_RIGHT, -0.34 for the two others, measured), the
+    pairs of the other cameras still agree (0.71, 0.78)."""
+    from mmengine.config import Config
+    from mmengine.registry import DATASETS, init_default_scope
+
+    from projects.occ_common.analysis.dataset_doctor.calibration import \
+        check_calibration
+    from projects.occ_common.analysis.dataset_doctor.sample_data import \
+        load_sample
+    cfg = Config.fromfile(PAPER)
+    init_default_scope('mmdet3d')
+    dataset = DATASETS.build(dict(cfg.test_dataloader.dataset,
+                                  data_root=real_sample_dir(),
+                                  ann_file=real_info))
+    sample = load_sample(dataset, 0, ego_box=cfg.ego_box)
+    front, back = sample.cameras[0], sample.cameras[3]
+    assert (front.name, back.name) == ('CAM_FRONT', 'CAM_BACK')
+    front.image, back.image = back.image, front.image
+    result = check_calibration(sample)
+    assert result.verdict == 'fail'
+    pairs = {k[:-len('.overlap_consistency')]: v
+             for k, v in result.numbers.items()
+             if k.endswith('.overlap_consistency')}
+    assert pairs['CAM_FRONT|CAM_FRONT_RIGHT'] < 0
+    assert pairs['CAM_FRONT|CAM_FRONT_LEFT'] < 0.4
+    assert pairs['CAM_BACK|CAM_BACK_RIGHT'] < 0.4
+    assert pairs['CAM_FRONT_LEFT|CAM_BACK_LEFT'] > 0.6
+    assert pairs['CAM_FRONT_RIGHT|CAM_BACK_RIGHT'] > 0.6
+
+
 def test_a_failing_check_sets_the_exit_status(world_copy, tmp_path):
     """A missing sweep: the sequence check fails and names the file, the
     tool's exit status is 1; --samples 1 checks the first sample only
