@@ -26,7 +26,7 @@ from projects.occ_common.testing.tool_logs import (REPO_ROOT,
                                                    run_tool, train_losses)
 
 #: The four-camera rig's configs train on their own world
-#: (tests/test_quad_rig_configs.py).
+#: (tests/test_quad_rig.py).
 TINY = sorted(
     p for p in glob.glob(osp.join(REPO_ROOT, 'configs', '*', '*_tiny_*.py'))
     if '-quad-' not in p)
