@@ -20,8 +20,12 @@ Per camera of a sample (numbers keyed ``<camera>.<name>``):
   swapped extrinsic differs by tens of degrees;
 * ``down_z``: the ego-frame height component of the camera's down axis,
   about -1 for an upright camera;
+* ``lidar2img_error``: where the info stores its own ``lidar2img``, its
+  largest difference from ``cam2img @ lidar2cam`` relative to the largest
+  entry (a matrix left stale when the calibration was edited);
 * ``points_in_view``: key-frame points projected inside the image in
-  front of the camera;
+  front of the camera; ``median_depth``: their median depth (metres: a
+  LiDAR in millimetres or centimetres shows here);
 * ``edge_alignment`` / ``edge_points``: :mod:`.edge_alignment`'s score,
   where the image was read (a weak signal on one frame: it only warns,
   and only over :data:`ALIGNMENT_POINTS` reflectivity edges);
@@ -60,6 +64,12 @@ WARN_M, FAIL_M = 0.5, 2.0
 UPRIGHT_Z = -0.5
 #: Nearest depth (m) of a point counted as in front of the camera.
 MIN_DEPTH = 0.5
+#: Median depth (m) of the points in view above these: warn, fail (a
+#: driving scene's points lie within 1-60 m; beyond 200 m the LiDAR's
+#: unit is not the metre).
+WARN_DEPTH, FAIL_DEPTH = 80.0, 200.0
+#: A stored lidar2img this far (relative) from cam2img @ lidar2cam: warn.
+STALE_TOLERANCE = 1e-3
 #: Edge alignment below this, over at least ``ALIGNMENT_POINTS`` edge
 #: points: warn. The real nuScenes key frame beside the checkout scores
 #: 1.14 to 1.65 on its six cameras (68 to 247 edge points), on another
@@ -138,6 +148,15 @@ def _check_camera(result: CheckResult, camera: CameraData,
     elif deg > WARN_DEG or metres > WARN_M:
         result.warn(f'{name}: lidar2cam is {deg:.1f} deg and {metres:.2f} '
                     'm off the one cam2ego and lidar2ego give')
+    if camera.recorded_lidar2img is not None:
+        scale = max(np.abs(camera.lidar2img).max(), 1e-12)
+        stale = float(np.abs(camera.recorded_lidar2img -
+                             camera.lidar2img).max() / scale)
+        numbers[f'{name}.lidar2img_error'] = stale
+        result.judge(stale, f'{name}: the info\'s lidar2img differs from '
+                     'cam2img @ lidar2cam by {value:.2g} of its largest '
+                     'entry (left stale when the calibration changed?)',
+                     lambda v: False, lambda v: v > STALE_TOLERANCE)
     down_z = float(camera.cam2ego[2, 1])
     numbers[f'{name}.down_z'] = down_z
     result.judge(down_z, f'{name}: the camera\'s down axis points '
@@ -152,13 +171,19 @@ def _check_projection(result: CheckResult, camera: CameraData,
     """``points_in_view`` and, with an image, ``edge_alignment``."""
     if width is None or not len(sample.points):
         return
-    u, v, inside, _ = in_view(sample.points, camera, width, height)
+    u, v, inside, depth = in_view(sample.points, camera, width, height)
     count = int(inside.sum())
     result.numbers[f'{camera.name}.points_in_view'] = float(count)
     if count == 0:
         result.fail(f'{camera.name}: no LiDAR point projects into the '
                     'image (the extrinsic looks away from the scene)')
         return
+    median = float(np.median(depth[inside]))
+    result.numbers[f'{camera.name}.median_depth'] = median
+    result.judge(median, f'{camera.name}: the points in view lie {{value:.0f}}'
+                 ' m away on the median (a LiDAR in another unit than the '
+                 'metre?)', lambda v: v > FAIL_DEPTH,
+                 lambda v: v > WARN_DEPTH)
     if camera.image is None or sample.points.shape[1] < 4:
         return
     score = edge_alignment(camera.image, u[inside], v[inside],

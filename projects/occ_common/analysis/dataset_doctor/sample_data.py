@@ -40,6 +40,8 @@ class CameraData:
         image (np.ndarray, optional): RGB, Shape (H, W, 3), uint8; None
             where it could not be read.
         timestamp (float, optional): Seconds.
+        recorded_lidar2img (np.ndarray, optional): The info's own
+            ``lidar2img`` where it has one. Shape (4, 4).
     """
     name: str
     img_path: str
@@ -49,6 +51,7 @@ class CameraData:
     recorded_size: Optional[tuple] = None
     image: Optional[np.ndarray] = None
     timestamp: Optional[float] = None
+    recorded_lidar2img: Optional[np.ndarray] = None
 
     @property
     def lidar2img(self) -> np.ndarray:
@@ -128,6 +131,9 @@ def _cameras(sample: SampleData, with_images: bool) -> None:
             lidar2cam=_pad44(entry['lidar2cam'], f'{where} lidar2cam'),
             cam2ego=_pad44(entry['cam2ego'], f'{where} cam2ego'),
             timestamp=entry.get('timestamp'))
+        if entry.get('lidar2img') is not None:
+            camera.recorded_lidar2img = _pad44(entry['lidar2img'],
+                                               f'{where} lidar2img')
         if entry.get('height') is not None and entry.get('width') is not None:
             camera.recorded_size = (int(entry['height']),
                                     int(entry['width']))

@@ -106,3 +106,53 @@ def test_unoccluded_keeps_the_nearest_points_of_a_cell():
     inside = np.array([True, True, True, True, False])
     assert unoccluded(u, v, depth, inside, WIDTH).tolist() == [
         True, True, True, False, False]
+
+
+def _camera_sample(points, recorded_lidar2img=None):
+    """One camera looking along the LiDAR's +x (its down axis the LiDAR's
+    -z), 200x100 pixels, fx = fy = 100, principal point at the centre; the
+    LiDAR and the ego frame are one."""
+    from projects.occ_common.analysis.dataset_doctor.sample_data import (
+        CameraData, SampleData)
+    cam2lidar = np.eye(4)
+    cam2lidar[:3, :3] = [[0, 0, 1], [-1, 0, 0], [0, -1, 0]]
+    camera = CameraData(
+        name='CAM', img_path='none.jpg',
+        cam2img=np.array([[100.0, 0, 100, 0], [0, 100, 50, 0], [0, 0, 1, 0],
+                          [0, 0, 0, 1]]),
+        lidar2cam=np.linalg.inv(cam2lidar), cam2ego=cam2lidar,
+        recorded_size=(100, 200), recorded_lidar2img=recorded_lidar2img)
+    return SampleData(index=0, token='t', info={}, points=points,
+                      lidar2ego=np.eye(4), ego2global=np.eye(4),
+                      cameras=[camera])
+
+
+def test_calibration_of_a_hand_made_camera():
+    """Points 10 m ahead project into the image: median depth 10, the
+    camera upright (down axis z -1), mounts and lidar2cam agree; the same
+    points in millimetres lie 10,000 'm' away: a failure; a stored
+    lidar2img off by 1 in one entry of largest entry 100 (0.01): a
+    warning."""
+    from projects.occ_common.analysis.dataset_doctor.calibration import \
+        check_calibration
+    points = np.array([[10.0, y, z, 1.0] for y in (-1, 0, 1)
+                       for z in (-1, 0, 1)])
+    good = check_calibration(_camera_sample(points))
+    assert good.verdict == 'pass', good.findings
+    assert good.numbers['CAM.median_depth'] == 10.0
+    assert good.numbers['CAM.points_in_view'] == 9
+    assert good.numbers['CAM.down_z'] == -1.0
+    assert good.numbers['CAM.extrinsic_deg'] < 1e-6
+    assert good.numbers['CAM.principal_x'] == 0.5
+    millimetres = points.copy()
+    millimetres[:, :3] *= 1000
+    unit = check_calibration(_camera_sample(millimetres))
+    assert unit.verdict == 'fail'
+    assert unit.numbers['CAM.median_depth'] == 10000.0
+    sample = _camera_sample(points)
+    stale = sample.cameras[0].lidar2img.copy()
+    stale[0, 3] += 1.0
+    sample.cameras[0].recorded_lidar2img = stale
+    warned = check_calibration(sample)
+    assert warned.verdict == 'warn'
+    assert warned.numbers['CAM.lidar2img_error'] == pytest.approx(0.01)
