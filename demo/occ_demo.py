@@ -57,6 +57,7 @@ from projects.occ_common.engine.config_checks import (CfgOptionsAction,
                                                       apply_cfg_options)
 from projects.occ_common.evaluation.occupancy_export import \
     write_occ3d_prediction
+from projects.occ_common.fileio.safe_names import safe_file_name
 from projects.occ_common.fileio.safe_pickle import RefusedGlobalError
 
 
@@ -182,10 +183,12 @@ def main(argv=None):
         except (FileNotFoundError, ValueError, RefusedGlobalError) as err:
             sys.exit(f'occ_demo.py: error: {err}')
         packed, output = inference_occupancy(model, dataset, sample.index)
+    # The token was checked when the sample was chosen (sample_info_file).
+    token = safe_file_name(sample.token, 'sample token', args.info_file)
     written = [
-        write_occ3d_prediction(args.out_dir, sample.token, output.pred_occ),
+        write_occ3d_prediction(args.out_dir, token, output.pred_occ),
         draw(cfg, dataset, packed, output,
-             osp.join(args.out_dir, f'{sample.token}.png'))
+             osp.join(args.out_dir, f'{token}.png'))
     ]
     for kind, path in zip(('prediction', 'picture'), written):
         print(f'{kind}: {path}')

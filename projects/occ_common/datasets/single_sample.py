@@ -23,6 +23,7 @@ import os.path as osp
 import warnings
 from typing import Mapping, NamedTuple, Optional
 
+from ..fileio.safe_names import safe_file_name
 from ..fileio.safe_pickle import load_info_file
 from .info_format import INFO_VERSION, check_info_file
 
@@ -137,12 +138,13 @@ def _convert_mmdet3d_sample(infos: dict, index: int, info_file: str,
                         _scene_index(data_root, version), (None, None), {},
                         report)
     info['prev_key_frame'] = None
+    token = safe_file_name(info['token'], 'sample token', info_file)
     for line in report.lines():
         # The scene only selects the rainy / night evaluation subsets.
         if not line.startswith('scene unknown'):
             warnings.warn(f'{info_file}: {line}')
     os.makedirs(out_dir, exist_ok=True)
-    target = osp.join(out_dir, f'{info["token"]}_info.pkl')
+    target = osp.join(out_dir, f'{token}_info.pkl')
     write_info_file(target, [info], version, 'demo', synthetic=False,
                     extended_from=osp.basename(info_file),
                     mmdet3d_info_version=meta.get('info_version'))
@@ -182,7 +184,9 @@ def sample_info_file(info_file: str,
     infos = load_info_file(info_file)
     kind = info_file_kind(infos, info_file)
     chosen = select_sample(infos['data_list'], info_file, index, token)
-    sample_token = infos['data_list'][chosen]['token']
+    # Checked here, before anything is written: the token names files.
+    sample_token = safe_file_name(infos['data_list'][chosen]['token'],
+                                  'sample token', info_file)
     if kind == 'occ':
         return SampleInfo(info_file, chosen, sample_token, kind)
     path = _convert_mmdet3d_sample(infos, chosen, info_file, data_root,
