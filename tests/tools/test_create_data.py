@@ -15,8 +15,7 @@ import pytest
 from PIL import Image
 
 from projects.occ_common.fileio.safe_pickle import load_info_file
-from projects.occ_common.testing.mmdet3d_infos import \
-    write_mmdet3d_info_file
+from projects.occ_common.testing.mmdet3d_infos import write_mmdet3d_info_file
 from projects.occ_common.testing.tool_logs import run_create_data
 from projects.occ_common.transforms import LoadMultiViewImagesOcc
 

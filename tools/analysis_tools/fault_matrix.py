@@ -413,7 +413,7 @@ def run_case(case: Case, timeout: float) -> str:
             child.kill()
             child.join()
             return 'hang'
-        if osp.exists(marker) or glob.glob(osp.join(folder, '**', 'marker'),
+        if osp.exists(marker) or glob.glob(osp.join(glob.escape(folder), '**', 'marker'),
                                            recursive=True):
             return 'code execution'
         if child.exitcode != 0:

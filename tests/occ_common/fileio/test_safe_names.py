@@ -11,8 +11,7 @@ import pytest
 from projects.occ_common.datasets.single_sample import sample_info_file
 from projects.occ_common.fileio.safe_names import safe_file_name
 from projects.occ_common.fileio.safe_pickle import load_info_file
-from projects.occ_common.testing.mmdet3d_infos import \
-    write_mmdet3d_info_file
+from projects.occ_common.testing.mmdet3d_infos import write_mmdet3d_info_file
 from projects.occ_common.testing.tool_logs import REPO_ROOT
 
 
