@@ -57,7 +57,6 @@ from projects.occ_common.engine.config_checks import (CfgOptionsAction,
                                                       apply_cfg_options)
 from projects.occ_common.evaluation.occupancy_export import \
     write_occ3d_prediction
-from projects.occ_common.fileio.safe_names import safe_file_name
 from projects.occ_common.fileio.safe_pickle import RefusedGlobalError
 
 
@@ -183,12 +182,14 @@ def main(argv=None):
         except (FileNotFoundError, ValueError, RefusedGlobalError) as err:
             sys.exit(f'occ_demo.py: error: {err}')
         packed, output = inference_occupancy(model, dataset, sample.index)
-    # The token was checked when the sample was chosen (sample_info_file).
-    token = safe_file_name(sample.token, 'sample token', args.info_file)
+    # Both named by the token, checked by sample_info_file (and again by
+    # write_occ3d_prediction): nothing is written outside --out-dir.
+    prediction = write_occ3d_prediction(args.out_dir, sample.token,
+                                        output.pred_occ)
     written = [
-        write_occ3d_prediction(args.out_dir, token, output.pred_occ),
+        prediction,
         draw(cfg, dataset, packed, output,
-             osp.join(args.out_dir, f'{token}.png'))
+             osp.splitext(prediction)[0] + '.png')
     ]
     for kind, path in zip(('prediction', 'picture'), written):
         print(f'{kind}: {path}')

@@ -116,9 +116,11 @@ def read_input_bytes(path: str,
         ValueError: See :func:`check_input_file`.
     """
     if _is_local(path, backend_args):
-        check_input_file(path, what, max_bytes)
+        size = check_input_file(path, what, max_bytes)
         with open(path, 'rb') as f:
-            raw = f.read(max_bytes + 1)  # a file that grew meanwhile
+            # Python allocates what read(n) asks for: the stat size, plus
+            # one byte to see a file that grew meanwhile.
+            raw = f.read(size + 1)
     else:
         from mmengine.fileio import get
         try:

@@ -21,7 +21,7 @@ from mmengine.model import is_model_wrapper
 from ...fileio.checkpoint_schemes import install_checkpoint_loader
 from ..checkpoint_check import (EVALUATE, FINE_TUNE, RESUME,
                                 check_checkpoint_state)
-from ..resume_checks import resumed_state_changes
+from ..resume_checks import kept_schedule_ends, resumed_state_changes
 
 
 def loaded_file(runner) -> str:
@@ -106,6 +106,8 @@ class CheckpointMatchHook(Hook):
             runner.cfg.filename, self.allow_key_mismatch and not resuming,
             hint, consequence)
         if resuming:
+            for line in kept_schedule_ends(runner, checkpoint):
+                runner.logger.warning(f'--resume: {line}.')
             changes = resumed_state_changes(runner, checkpoint)
             if changes:
                 raise ValueError(
