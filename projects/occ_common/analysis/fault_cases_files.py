@@ -215,6 +215,7 @@ _MMENGINE_CASES = [
 FILE_CASES: List[Case] = [
     Case('TorchScript checkpoint: load_checkpoint_file', CLEAR,
          _torchscript(), _load_checkpoint_file,
+         names=lambda path: [osp.basename(path), 'TorchScript'],
          guards=('TorchScript refused', )),
     Case('TorchScript checkpoint: tools/test.py', CLEAR, _torchscript(),
          tool('tools/test.py', CONFIG, '{path}', '--work-dir', '{work}')),

@@ -115,6 +115,12 @@ def _checkpoint_of(work):
     return [osp.join(work, 'epoch_1.pth')]
 
 
+def _run_files(work):
+    """The first run's checkpoint and pointer (a second run resuming
+    there rewrites the pointer under it)."""
+    return [osp.join(work, 'epoch_1.pth'), osp.join(work, 'last_checkpoint')]
+
+
 def _symlinked_pointer(folder, marker):
     """A toy work dir whose last_checkpoint links to a file of the user's
     (naming epoch_1.pth)."""
@@ -208,10 +214,10 @@ RUN_CASES: List[Case] = [
     Case('--resume exp[1]/epoch_1.pth next to epoch_2/3.pth', CLEAR,
          _bracketed, _resume_before_later_steps,
          guards=('glob-safe listing', )),
-    Case('second run into a work dir in use: tools/train.py', CLEAR,
-         _in_use, kept(lambda work: _train(work, *_epochs(1)),
-                       _checkpoint_of),
-         guards=('lock refuses', )),
+    Case('second run into a work dir in use: tools/train.py --resume',
+         CLEAR, _in_use,
+         kept(lambda work: _train(work, '--resume', *_epochs(2)),
+              _run_files), guards=('lock refuses', )),
     Case('finished run re-run without --resume: tools/train.py', CLEAR,
          _toy_copy, kept(lambda work: _train(work, *_epochs(1)),
                          _checkpoint_of),
