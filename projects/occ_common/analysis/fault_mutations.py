@@ -68,7 +68,7 @@ MUTATIONS: Dict[str, Mutation] = {
         "osp.join(folder, '*.pth')))"),
     'lock refuses': Mutation(
         'projects.occ_common.engine.run_lock:owner_gone',
-        'if not _alive(pid):', 'if True:'),
+        'if not process_alive(pid):', 'if True:'),
     'earlier run kept': Mutation(
         'projects.occ_common.engine.run_lock:_take',
         'earlier = [] if resume else earlier_run_files(work_dir)',

@@ -130,10 +130,10 @@ def write_os_system(path: str, kind: str, marker: str) -> str:
 
 
 def write_config_payload(source: str, path: str, marker: str) -> str:
-    """``source`` (a genuine Runner checkpoint, read with plain
-    ``torch.load``: it is this library's own) with ``meta['config']`` a
+    """``source`` (a genuine Runner checkpoint) with ``meta['config']`` a
     one-line payload writing ``marker``; saved to ``path``, returned."""
-    checkpoint = torch.load(source, map_location='cpu', weights_only=False)
+    from ..fileio.safe_pickle import load_checkpoint_file
+    checkpoint = load_checkpoint_file(source, map_location='cpu')
     checkpoint['meta']['config'] = f"_ = open({marker!r}, 'w').write('pwned')"
     torch.save(checkpoint, path)
     return path

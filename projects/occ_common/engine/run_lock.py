@@ -67,7 +67,9 @@ def _start_time(pid: int) -> Optional[str]:
     return stat[stat.rindex(')') + 2:].split()[19]
 
 
-def _alive(pid: int) -> bool:
+def process_alive(pid: int) -> bool:
+    """Whether a process with ``pid`` runs on this host (another user's
+    counts)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -103,7 +105,7 @@ def owner_gone(owner: dict, mtime: float,
         return 'it names no process'
     if pid == os.getpid():
         return 'it is this process\'s own, left by a run that failed'
-    if not _alive(pid):
+    if not process_alive(pid):
         return f'no process {pid} runs on this host'
     start = _start_time(pid)
     if start is not None and owner.get('start') not in (None, start):
@@ -348,5 +350,5 @@ def hold_work_dir(work_dir: str, resume: bool = False,
 __all__ = [
     'HEARTBEAT_SECONDS', 'LOCK_NAME', 'RunLock', 'STALE_SECONDS',
     'WorkDirError', 'WorkDirInUseError', 'earlier_run_files',
-    'held_lock', 'hold_work_dir', 'owner_gone'
+    'held_lock', 'hold_work_dir', 'owner_gone', 'process_alive'
 ]

@@ -161,15 +161,6 @@ def load_origin_frames(ann_file: str,
 def load_ray_origins(ann_file: str,
                      data_root: Optional[str] = None
                      ) -> Dict[str, np.ndarray]:
-    """:func:`scene_ray_origins` of every sample of an info file.
-
-    Args:
-        ann_file (str): Info file written by ``tools/create_data.py``,
-            relative to ``data_root`` or absolute.
-        data_root (str, optional): Folder ``ann_file`` is relative to.
-            Defaults to None.
-
-    Returns:
-        dict[str, np.ndarray]: Sample token to origins. Shape (T, 3) each.
-    """
+    """The origins of :func:`load_origin_frames` alone: sample token to
+    origins, Shape (T, 3) each."""
     return load_origin_frames(ann_file, data_root)[0]

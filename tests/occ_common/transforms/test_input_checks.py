@@ -89,6 +89,18 @@ def test_oversized_image_is_refused_before_it_is_read(tmp_path):
         LoadMultiViewImagesOcc()(dict(images=dict(A=_view(path)), token='t'))
 
 
+def _peak_bytes(load, results):
+    """``load(results)``, asserting that it allocates under 32 MB at its
+    peak (numpy's allocations included) whether it returns or raises."""
+    tracemalloc.start()
+    try:
+        return load(results)
+    finally:
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        assert peak < 32 << 20, f'{peak:,} bytes allocated'
+
+
 def _npy(array_header, data: bytes) -> bytes:
     out = io.BytesIO()
     np.lib.format.write_array_header_1_0(out, array_header)
@@ -105,16 +117,10 @@ def test_npz_bomb_is_refused_before_it_is_decompressed(tmp_path):
     write_npz_bomb(str(path), 'semantics', (2000, 2000, 80),
                    [('mask_lidar', grid), ('mask_camera', grid)])
     assert path.stat().st_size < 1 << 20
-    tracemalloc.start()
-    try:
-        with pytest.raises(ValueError, match='semantics must be an integer '
-                           r'array of shape \(200, 200, 16\), got uint8 '
-                           r'\(2000, 2000, 80\)'):
-            LoadOccupancyGT('occ3d')(dict(occ_path=str(path)))
-        peak = tracemalloc.get_traced_memory()[1]
-    finally:
-        tracemalloc.stop()
-    assert peak < 32 << 20
+    with pytest.raises(ValueError, match='semantics must be an integer '
+                       r'array of shape \(200, 200, 16\), got uint8 '
+                       r'\(2000, 2000, 80\)'):
+        _peak_bytes(LoadOccupancyGT('occ3d'), dict(occ_path=str(path)))
 
 
 def test_npy_declaring_a_huge_array_is_refused_before_allocating(tmp_path):
@@ -125,16 +131,10 @@ def test_npy_declaring_a_huge_array_is_refused_before_allocating(tmp_path):
     path.write_bytes(_npy(dict(descr='<i8', fortran_order=False,
                                shape=(50_000_000, 4)),
                           np.zeros(4, np.int64).tobytes()))
-    tracemalloc.start()
-    try:
-        with pytest.raises(ValueError, match=r'is truncated or not a \.npy '
-                           r'array: its header declares int64 \(50000000, '
-                           r'4\) \(1,600,000,000 bytes\) but 32 bytes'):
-            LoadOccupancyGT('surroundocc')(dict(occ_path=str(path)))
-        peak = tracemalloc.get_traced_memory()[1]
-    finally:
-        tracemalloc.stop()
-    assert peak < 32 << 20
+    with pytest.raises(ValueError, match=r'is truncated or not a \.npy '
+                       r'array: its header declares int64 \(50000000, '
+                       r'4\) \(1,600,000,000 bytes\) but 32 bytes'):
+        _peak_bytes(LoadOccupancyGT('surroundocc'), dict(occ_path=str(path)))
 
 
 def test_exif_orientation_is_ignored(tmp_path):

@@ -40,6 +40,7 @@ from ...fileio.atomic_file_backend import atomic_write, is_temporary_file
 from ...fileio.safe_pickle import load_checkpoint_file
 from ..checkpoint_steps import (by_step, checkpoint_steps, name_step,
                                 step_checkpoints)
+from ..run_lock import process_alive
 
 
 def _same_file(a: str, b: str) -> bool:
@@ -136,15 +137,7 @@ def later_checkpoints(work_dir: str, resume_from: str) -> List[str]:
 def _writer_alive(name: str) -> bool:
     """Whether the process that writes temporary file ``name`` runs."""
     pid = int(name.rsplit('.', 3)[1])
-    if pid == os.getpid():
-        return False
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True  # another user's process
-    return True
+    return pid != os.getpid() and process_alive(pid)
 
 
 def repair_work_dir(work_dir: str) -> List[str]:
