@@ -442,7 +442,8 @@ def read_curves(work_dir: str) -> Dict[str, List]:
     """
     loss, val = {}, {}
     for path in sorted(
-            glob.glob(osp.join(work_dir, '*', 'vis_data', 'scalars.json'))):
+            glob.glob(osp.join(glob.escape(work_dir), '*', 'vis_data',
+                               'scalars.json'))):
         for record in read_json_lines(path):
             step = int(record['step'])
             if 'loss' in record:
@@ -659,7 +660,7 @@ def main(argv=None):
     # The table holds every finished run of OUT, also those of earlier
     # invocations (other budgets or options: see each run's settings).
     rows = [_load_json(path) for path in sorted(
-        glob.glob(osp.join(out, 'runs', '*', RESULT)))]
+        glob.glob(osp.join(glob.escape(out), 'runs', '*', RESULT)))]
     table = format_table(rows, [
         ('train CPU time (all threads)',
          lambda r: f'{r.get("train_cpu_s", math.nan) / 60:.1f} min'),
