@@ -7,10 +7,14 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 export VENV
 
-.PHONY: setup test lint demo clean-env
+.PHONY: setup viewer test lint demo clean-env
 
 setup:
 	@bash tools/misc/setup_env.sh
+
+# three.js and esbuild for tools/misc/browse_occ.py (npm ci; needs Node.js).
+viewer:
+	@bash tools/misc/setup_browser.sh
 
 lint: setup
 	$(PY) -m flake8 projects tools tests configs demo
@@ -19,8 +23,11 @@ lint: setup
 # Two pytest-xdist workers of one thread each (tests/conftest.py), a module
 # per worker at a time so that module fixtures are built once: 8.6 minutes
 # on 2 cores against 12.4 in one process. TEST_WORKERS=0 runs in-process.
+# The viewer's browser tests also need Debian's chromium, installed here
+# when run as root (they skip, saying why, where it cannot be).
 TEST_WORKERS ?= 2
 test: lint
+	@bash tools/misc/setup_browser.sh --with-chromium
 	$(PY) -m pytest tests -n $(TEST_WORKERS) --dist loadscope
 
 # Synthetic world -> train and evaluate both tiny models -> table + pictures

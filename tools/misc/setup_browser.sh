@@ -2,12 +2,14 @@
 # Installs what the 3D viewer (tools/misc/browse_occ.py) and its browser
 # tests need beyond the Python environment, idempotently:
 #
-#   * three.js, pinned in package.json / package-lock.json, into
-#     node_modules/ of the repository (`npm ci`), when npm is on PATH;
-#   * Debian's chromium (headless, for tests/occ_common/visualization/web/),
-#     with apt-get when run as root and chromium is absent.
+#   * three.js and the bundler esbuild, pinned in package.json /
+#     package-lock.json, into node_modules/ of the repository (`npm ci`,
+#     no install scripts), when npm is on PATH;
+#   * with --with-chromium: Debian's chromium (headless, for the browser
+#     tests), with apt-get when run as root and chromium is absent.
 #
-#   bash tools/misc/setup_browser.sh
+#   bash tools/misc/setup_browser.sh                  # `make viewer`
+#   bash tools/misc/setup_browser.sh --with-chromium  # `make test` runs it
 #
 # Each part that cannot be installed here is skipped with a line saying why
 # and what to do; the viewer then says what is missing, and the browser
@@ -38,6 +40,9 @@ fi
 
 # Chromium for the browser tests only; the viewer itself runs in the
 # user's own browser.
+if [[ "${1:-}" != --with-chromium ]]; then
+    exit 0
+fi
 if command -v chromium >/dev/null 2>&1; then
     log "chromium is installed: $(command -v chromium)"
 elif [[ "$(id -u)" == 0 ]] && command -v apt-get >/dev/null 2>&1; then

@@ -77,20 +77,30 @@ export class OccScene {
     return this.pending;
   }
 
-  // Look at the grid from behind the car, `forward` ('+x', '-y', ...)
-  // being the grid direction ahead of it.
+  // Look at the whole grid from behind the car and above, `forward`
+  // ('+x', '-y', ...) being the grid direction ahead of it.
   resetView(grid, forward) {
-    const [x0, y0, z0, x1, y1] = grid.pc_range;
+    const [x0, y0, z0, x1, y1, z1] = grid.pc_range;
     const sign = forward[0] === '-' ? -1 : 1;
     const ahead = forward[1] === 'x' ? [sign, 0] : [0, sign];
     const reach = Math.max(x1 - x0, y1 - y0) / 2;
     const cx = (x0 + x1) / 2, cy = (y0 + y1) / 2;
-    this.camera.position.set(cx - ahead[0] * reach * 0.9,
-                             cy - ahead[1] * reach * 0.9, z0 + reach * 0.8);
-    this.controls.target.set(cx + ahead[0] * reach * 0.1,
-                             cy + ahead[1] * reach * 0.1, z0);
+    // 1.6 x the half-width at 45 degrees: the grid's near edge and its
+    // far corners are in view.
+    const back = reach * 1.6 / Math.SQRT2;
+    this.camera.position.set(cx - ahead[0] * back, cy - ahead[1] * back,
+                             z0 + back);
+    this.controls.target.set(cx, cy, (z0 + z1) / 2);
     this.controls.update();
     this.render();
+  }
+
+  // Put the camera at `position` looking at `target` (grid frame).
+  setCamera(position, target) {
+    this.camera.position.set(...position);
+    this.controls.target.set(...target);
+    this.controls.update();
+    return this.render();
   }
 
   // Look through a camera: from its centre towards its image's centre,
