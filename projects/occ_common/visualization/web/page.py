@@ -22,7 +22,8 @@ section { border-top: 1px solid #eee; }
 .row .count { margin-left: auto; color: #666; font-size: 11px; }
 .swatch { width: 12px; height: 12px; border: 1px solid #888;
           display: inline-block; }
-.views label { margin-right: 8px; }
+.views { display: flex; gap: 8px; }
+.views label { white-space: nowrap; }
 .flag { display: inline-block; padding: 1px 6px; margin-right: 4px;
         border-radius: 8px; background: #e8e8e8; }
 .flag.rain { background: #cfe3ff; } .flag.night { background: #333;

@@ -171,3 +171,27 @@ def test_served_page_navigation_flags_and_readout(browser, script):
     finally:
         server.shutdown()
         server.server_close()
+
+
+def test_points_without_a_grid(browser, script, tmp_path):
+    """A key frame without labels (the real sample's case): no voxels, no
+    class list; its LiDAR points by lidarseg class show the class colours
+    (a 20 x 20 patch of car points and one of vegetation points), by
+    height neither."""
+    xs, ys = np.meshgrid(np.linspace(1, 3, 20), np.linspace(1, 3, 20))
+    patch = np.stack([xs.ravel(), ys.ravel(), np.full(400, 0.5)], 1)
+    points = np.concatenate([patch, patch + [3, 3, 0]])
+    labels = np.repeat([CAR, VEGETATION], 400)
+    message = encode_sample(
+        dict(name='frame', pc_range=[0, 0, 0, 8, 8, 4], voxel_size=[1] * 3,
+             points=points, point_labels=labels), 17, 0)
+    path = tmp_path / 'frame.html'
+    export_html(str(path), _meta(1), [message], script)
+    image = _open(browser, path.as_uri())
+    assert browser.evaluate('document.querySelector("#class-4")'
+                            '.closest("section").hidden')
+    assert _shown(image, PALETTE[CAR]) == 0
+    browser.evaluate('window.occViewer.state.pointSize = 6')
+    image = _act(browser, 'window.occViewer.setPoints("class")')
+    assert _shown(image, PALETTE[CAR]) > SHOWN
+    assert _shown(image, PALETTE[VEGETATION]) > SHOWN

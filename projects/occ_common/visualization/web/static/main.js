@@ -158,8 +158,9 @@ class Viewer {
       colours.push(rgb[0], rgb[1], rgb[2]);
     }
     this.sample.classCounts = counts;
-    const [kept, keptColours] = exposed(this.sample.header.grid.shape, flat,
-                                        colours);
+    const shape = this.sample.header.grid.shape;
+    const [kept, keptColours] = shape ? exposed(shape, flat, colours)
+                                      : [new Uint32Array(0), []];
     this.scene.setVoxels(this.sample.header.grid, kept, keptColours);
     this.drawPoints();
     this.panel.show(st, this.sample);

@@ -71,8 +71,9 @@ export class Panel {
     const none = element('button', {id: 'classes-none',
                                     textContent: 'none'});
     none.addEventListener('click', () => actions.setAllClasses(false));
-    root.append(section('classes', element('div', {}, [all, none]),
-                        ...this.classRows.map(r => r.row)));
+    this.classSection = section('classes', element('div', {}, [all, none]),
+                                ...this.classRows.map(r => r.row));
+    root.append(this.classSection);
     this.errorRows = meta.error_names.map((name, code) => checkRow(
         `error-${code}`, code === 0 ? 'correct (true positive)' : name,
         meta.error_palette[code], true,
@@ -134,6 +135,8 @@ export class Panel {
       radio.checked = state.view === view;
     }
     this.mask.disabled = !s.visibility;
+    // A key frame without labels or prediction has no voxels to list.
+    this.classSection.hidden = !s.gt && !s.pred;
     this.mask.value = state.mask;
     this.classRows.forEach((r, label) => {
       r.box.checked = !state.hiddenClasses.has(label);
