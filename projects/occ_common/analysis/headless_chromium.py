@@ -8,9 +8,10 @@ websocket client, no driver binary and no browser download are needed.
 
 The flags keep it quiet on a machine without network (without the
 background-networking ones it floods a closed network with connection
-attempts) and give it software WebGL (SwiftShader through ANGLE: headless
-Chromium has no GPU here; ``--enable-unsafe-swiftshader`` lets WebGL use it
-since Chromium 139).
+attempts) and ask for software WebGL (SwiftShader through ANGLE: headless
+Chromium has no GPU here). Chromium 156 falls back to SwiftShader without
+the two SwiftShader flags too (checked 2026-11-28); they keep the tests
+working where a release stops falling back by itself.
 """
 import base64
 import fcntl

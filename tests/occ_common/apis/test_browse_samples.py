@@ -13,7 +13,7 @@ from projects.occ_common.apis.browse_samples import (BrowseSamples,
 from projects.occ_common.evaluation.occupancy_export import \
     write_occ3d_prediction
 from projects.occ_common.visualization.palette import convention_classes
-from projects.occ_common.visualization.web import unpack_message
+from projects.occ_common.visualization.web import encode_sample, unpack_message
 
 CONFIG = 'configs/sdg_occ/sdgocc-fusion_tiny_1xb1-6e_occ3d-nus-synthetic.py'
 FREE, CAR = 17, 4
@@ -116,7 +116,7 @@ def test_model_prediction_and_probability(cfg, dataset, tmp_path):
     prob, pred = scene['pred_prob'], scene['pred_occ']
     assert pred.shape == prob.shape == (200, 200, 16)
     assert prob.min() >= 1 / 18 - 1e-6 and prob.max() <= 1
-    header, arrays = unpack_message(samples.encode(0)[0])
+    header, arrays = unpack_message(encode_sample(scene, 18, FREE)[0])
     np.testing.assert_array_equal(arrays['pred'].reshape(pred.shape), pred)
     assert len(arrays['prob']) == int((pred != FREE).sum())
     assert arrays['prob'].min() >= 14

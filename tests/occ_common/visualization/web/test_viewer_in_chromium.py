@@ -54,10 +54,13 @@ def _sample(index: int):
     if index == 1:  # the second sample: vegetation only, in the rain
         gt = np.where(gt == VEGETATION, gt, 0).astype(np.uint8)
         pred = gt.copy()
+    # No camera sees the car's columns.
+    mask_camera = np.ones(gt.shape, dtype=bool)
+    mask_camera[2:4, 2:4] = False
     scene = dict(name=f'sample{index}', scene_name='scene-test',
                  is_rainy=index == 1, pc_range=[0, 0, 0, 8, 8, 4],
                  voxel_size=[1, 1, 1], forward='+x', gt_occ=gt,
-                 pred_occ=pred, pred_prob=prob)
+                 pred_occ=pred, pred_prob=prob, mask_camera=mask_camera)
     return encode_sample(scene, len(SURROUNDOCC_CLASS_NAMES), 0)
 
 
@@ -114,7 +117,9 @@ def _open(browser, url: str, index: int = 0):
 
 def test_exported_file_classes_toggles_and_errors(browser, script, tmp_path):
     """Offline file: the three classes' colours show; unticking ``car``
-    removes its colour and keeps the others; the error view shows the
+    removes its colour and keeps the others, and so does showing only
+    what a camera sees (the car's columns are outside ``mask_camera``);
+    the error view shows the
     false positive, false negative and wrong-class colours (and grey
     for the correct voxels); unticking false positives removes red. The
     page asks for nothing but its own file and data: URLs."""
@@ -129,6 +134,12 @@ def test_exported_file_classes_toggles_and_errors(browser, script, tmp_path):
     assert _shown(image, PALETTE[ROAD]) > SHOWN
     assert _shown(image, PALETTE[VEGETATION]) > SHOWN
     browser.evaluate('document.getElementById("class-4").click()')
+    # Only what a camera sees: the car goes, the road stays.
+    image = _act(browser, 'const m = document.getElementById("mask-mode");'
+                 'm.value = "camera"; m.dispatchEvent(new Event("change"))')
+    assert _shown(image, PALETTE[CAR]) == 0
+    assert _shown(image, PALETTE[ROAD]) > SHOWN
+    browser.evaluate('window.occViewer.setMask("none")')
     image = _act(browser, 'document.getElementById("view-errors").click()')
     for code in (0, FP, FN, WRONG):
         assert _shown(image, ERROR_PALETTE[code]) > SHOWN, code
