@@ -368,7 +368,8 @@ def _train_clock_hook(max_seconds: Optional[float], path: str,
             meta = checkpoint.get('meta', {})
             self.seconds = float(meta.get('train_seconds', 0.0))
             self.cpu_seconds = float(meta.get('train_cpu_seconds', 0.0))
-            self.stopped_by_time = bool(meta.get('stopped_by_time', False))
+            # Not restored: a resumed run goes on, and says it stopped by
+            # time only if its own limit stops it again.
 
         def after_train(self, runner):
             self._write(runner)

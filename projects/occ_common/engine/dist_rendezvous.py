@@ -47,13 +47,19 @@ def init_timeout() -> float:
     return value
 
 
-def missing_peer_message(timeout: float) -> str:
-    """The line a rank prints when the group has not formed in time."""
+def _who_and_where() -> str:
+    """``rank R of W`` and the rendezvous address, from the environment."""
     env = os.environ
     rank = env.get('RANK', env.get('SLURM_PROCID', '?'))
     world = env.get('WORLD_SIZE', env.get('SLURM_NTASKS', '?'))
     address = f'{env.get("MASTER_ADDR", "?")}:{env.get("MASTER_PORT", "?")}'
-    return (f'rank {rank} of {world}: the process group at {address} did '
+    return f'rank {rank} of {world}', address
+
+
+def missing_peer_message(timeout: float) -> str:
+    """The line a rank prints when the group has not formed in time."""
+    who, address = _who_and_where()
+    return (f'{who}: the process group at {address} did '
             f'not form within {timeout:g} s: a peer is missing (did every '
             'node start, with its own NODE_RANK and the same MASTER_ADDR, '
             f'MASTER_PORT and world size?). Set {INIT_TIMEOUT_ENV}=SECONDS '
@@ -85,6 +91,13 @@ def rendezvous_deadline(timeout: Optional[float] = None) -> Iterator[None]:
                          daemon=True).start()
     try:
         yield
+    except (RuntimeError, OSError) as err:
+        # torch's own failures (an address in use, a refused connection:
+        # DistNetworkError is a RuntimeError) named neither the rank nor
+        # the rendezvous address.
+        who, address = _who_and_where()
+        raise RuntimeError(f'{who}: could not form the process group at '
+                           f'{address}: {err}') from err
     finally:
         done.set()
 

@@ -71,3 +71,31 @@ def test_the_deadline_is_stated_and_checked(monkeypatch):
         monkeypatch.setenv(INIT_TIMEOUT_ENV, bad)
         with pytest.raises(ValueError, match=f'{INIT_TIMEOUT_ENV}='):
             init_timeout()
+
+
+def test_a_failed_rendezvous_names_rank_and_address(monkeypatch):
+    """torch's own failure inside the block (here the DistNetworkError of
+    a rendezvous port another process holds) is raised naming the rank,
+    the world size and the address, with torch's message after it (before:
+    torch's message alone, naming neither)."""
+    import socket
+
+    import torch.distributed as dist
+    holder = socket.socket()
+    holder.bind(('127.0.0.1', 0))
+    holder.listen(1)
+    port = holder.getsockname()[1]
+    monkeypatch.setenv('RANK', '0')
+    monkeypatch.setenv('WORLD_SIZE', '2')
+    monkeypatch.setenv('MASTER_ADDR', '127.0.0.1')
+    monkeypatch.setenv('MASTER_PORT', str(port))
+    try:
+        with pytest.raises(RuntimeError) as err:
+            with dist_rendezvous.rendezvous_deadline(30):
+                dist.init_process_group('gloo')
+    finally:
+        holder.close()
+    assert str(err.value).startswith(
+        f'rank 0 of 2: could not form the process group at '
+        f'127.0.0.1:{port}: ')
+    assert not dist.is_initialized()
