@@ -4,7 +4,7 @@ on a broken synthetic world, in-process.
 The real frame (``../shared``; skipped where absent) has no labels, no
 sweeps and no previous key frame: its label checks are skipped and the
 label-free ones pass. Its numbers, measured when this was written
-(2026-12), are the reference values docs/customize_dataset.md quotes:
+(2026-11), are the reference values docs/customize_dataset.md quotes:
 the five overlapping camera pairs agree at rank correlation 0.71-0.96,
 the reflectivity edges land on image edges 1.14-1.65 times as often as
 by chance, and every ``lidar2cam`` is within 0.07 deg / 0.4 m of the one

@@ -14,7 +14,9 @@ in place the way a user's converter or preprocessing would:
 * :func:`flipped_labels`: the labels mirrored along one axis;
 * :func:`labels_with_voxel_size`: labels voxelised at another voxel size
   than their format's (and the config's);
-* :func:`missing_sweep`: one sweep file of a sample deleted.
+* :func:`missing_sweep`: one sweep file of a sample deleted;
+* :func:`sweeps_without_ego_motion`: the sweeps' poses relative to the
+  key frame computed as if the car stood still.
 
 The labels are resampled voxel for voxel (the label of the voxel whose
 centre the damaged grid's voxel centre falls in), so that the damaged
@@ -245,3 +247,28 @@ def missing_sweep(root: str, sample: int = 0, sweep: int = 3) -> str:
                     entry['lidar_sweeps'][sweep]['lidar_points']['lidar_path'])
     os.remove(path)
     return path
+
+
+def sweeps_without_ego_motion(root: str) -> int:
+    """Every sweep's ``sensor2lidar`` (and ``lidar2sensor``) computed from
+    the mounts alone, ``inv(lidar2ego_key) @ lidar2ego_sweep``, as a
+    converter that forgets the ego poses writes it: merged sweeps then
+    smear whatever moved relative to the car. Returns the sweeps edited."""
+    count = 0
+    for path in _info_files(root):
+        infos = load_info_file(path)
+        done = set()
+        for entry in infos['data_list']:
+            key = np.asarray(entry['lidar_points']['lidar2ego'], np.float64)
+            for sweep in entry.get('lidar_sweeps') or []:
+                points = sweep['lidar_points']
+                if id(points) in done:
+                    continue
+                done.add(id(points))
+                still = np.linalg.inv(key) @ np.asarray(
+                    points['lidar2ego'], np.float64)
+                points['sensor2lidar'] = still.tolist()
+                points['lidar2sensor'] = np.linalg.inv(still).tolist()
+                count += 1
+        mmengine.dump(infos, path)
+    return count

@@ -74,12 +74,12 @@ STALE_TOLERANCE = 1e-3
 #: points: warn. The real nuScenes key frame beside the checkout scores
 #: 1.14 to 1.65 on its six cameras (68 to 247 edge points), on another
 #: camera's image 0.59 to 1.15; the synthetic world's flat-shaded classes
-#: give few reflectivity edges (measured 2026-12).
+#: give few reflectivity edges (measured 2026-11).
 WARN_ALIGNMENT, ALIGNMENT_POINTS = 1.05, 100
 #: Overlap consistency below these: fail, warn. Measured: 0.71 to 0.96 on
 #: the real key frame's five overlapping pairs and 0.68 to 0.98 on the
 #: synthetic world's; -0.78 to 0.39 where two cameras' images are swapped
-#: (the real frame's CAM_FRONT and CAM_BACK: -0.69, -0.34, -0.34; 2026-12).
+#: (the real frame's CAM_FRONT and CAM_BACK: -0.69, -0.34, -0.34; 2026-11).
 FAIL_OVERLAP, WARN_OVERLAP = 0.4, 0.5
 
 

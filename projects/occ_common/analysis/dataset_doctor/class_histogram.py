@@ -15,12 +15,12 @@ The references:
 * ``occ3d``: the voxel counts of Occ3D-nuScenes' labels that FlashOCC
   weights its loss with (github.com/Yzichen/FlashOCC, file
   ``projects/mmdet3d_plugin/models/dense_heads/bev_occ_head.py``,
-  ``nusc_class_frequencies``, read 2026-12): 18 counts, ``others`` to
+  ``nusc_class_frequencies``, read 2026-11): 18 counts, ``others`` to
   ``free``; their ``free`` share, 77.5 %, is below the whole grid's, so
   they are not all the grid's voxels, and only the occupied classes'
   shares are compared.
 * ``surroundocc``: no class counts of SurroundOcc's labels are published
-  (its paper and repository give none; looked up 2026-12), so the 16
+  (its paper and repository give none; looked up 2026-11), so the 16
   classes' shares among the occupied voxels are Occ3D's above: the same
   nuScenes scenes and lidarseg classes, voxelised at 0.5 m over 100 m
   instead of 0.4 m over 80 m.

@@ -14,7 +14,7 @@ tell a right calibration from a wrong one without a target:
   of range edges: range edges sit where the LiDAR and the camera, a metre
   apart, see an object's silhouette against different backgrounds, which
   on the real nuScenes key frame made them no better than chance for two
-  of six cameras (measured when this was written, 2026-12).
+  of six cameras (measured when this was written, 2026-11).
 * :func:`overlap_consistency`, per pair of cameras: a LiDAR point seen by
   two cameras is one surface, so the two images' brightness at its two
   projections should agree. The score is Spearman's rank correlation of

@@ -9,7 +9,7 @@ Occ3D: ego frame). What is asserted: the split's verdict is ``fail``, the
 failing checks are exactly the one the bug belongs to, and its finding
 names what is wrong (the other reading of the grid that fits, the camera
 pair, the file), with the numbers that were measured when this was
-written (2026-12) as bounds.
+written (2026-11) as bounds.
 """
 import os.path as osp
 
@@ -68,6 +68,7 @@ def test_untouched_world_passes(converted_tiny_world, occ_format):
     # Timestamps of ~1.5e9 s carry float64 steps of ~2e-7 s.
     gap = sequence['max_sweep_gap_s']['max']
     assert gap == pytest.approx(0.05, abs=1e-6)
+    assert sequence['sweep_pose_error_m']['max'] < 1e-3
     assert report.summaries['class_histogram'].numbers['distance'][
         'mean'] < 0.2
     masks = report.summaries['masks']
@@ -97,14 +98,18 @@ def test_untouched_world_passes(converted_tiny_world, occ_format):
     (broken_worlds.resized_images, 'calibration',
      'the image is 80x45 but its calibration is for 160x90'),
     (broken_worlds.missing_sweep, 'sequence', 'file missing'),
+    (broken_worlds.sweeps_without_ego_motion, 'sequence',
+     'sweeps would be merged with the wrong poses'),
 ], ids=['labels in the ego frame', 'shifted origin', 'flipped axis',
         'wrong voxel size', 'transposed extrinsic', 'swapped cameras',
-        'images resized after calibration', 'missing sweep'])
+        'images resized after calibration', 'missing sweep',
+        'sweeps without ego motion'])
 def test_broken_world_fails_naming_the_check(world_copy, damage, check,
                                              named):
     """SurroundOcc config; the label bugs move the labels against the
     points (as configured 0.11-0.85 of the points on labelled surfaces,
-    0.96-0.98 read the way the bug wrote them)."""
+    0.96-0.98 read the way the bug wrote them); sweeps merged as if the
+    car stood still are 2.4-2.5 m off (the car drives at 4.9 m/s)."""
     damage(world_copy)
     report = _doctor(world_copy)
     assert report.verdict == FAIL
@@ -115,6 +120,9 @@ def test_broken_world_fails_naming_the_check(world_copy, damage, check,
         assert numbers['best_other.gain']['min'] > 0.1
         assert numbers['best_other.hit']['max'] > 0.9 or numbers[
             'best_other.hit_elevated']['max'] > 0.9
+    if 'merged' in named:
+        numbers = report.summaries[check].numbers
+        assert numbers['sweep_pose_error_m']['min'] > 2.0
 
 
 def test_occ3d_labels_in_the_lidar_frame(world_copy):
