@@ -50,8 +50,11 @@ def every_view(corrupt: Callable) -> Callable:
     :mod:`.pixels`) to every view, in view order."""
 
     def apply(results: dict, level, rng: np.random.Generator) -> None:
-        results['img'] = [corrupt(img, level, rng)
-                          for img in _views(results)]
+        imgs = _views(results)
+        # One stream per view: a view's draws do not depend on how many
+        # the views before it took at this severity.
+        results['img'] = [corrupt(img, level, child)
+                          for img, child in zip(imgs, rng.spawn(len(imgs)))]
 
     apply.__name__ = corrupt.__name__
     apply.__doc__ = corrupt.__doc__
@@ -60,10 +63,11 @@ def every_view(corrupt: Callable) -> Callable:
 
 def camera_crash(results: dict, count: int,
                  rng: np.random.Generator) -> None:
-    """``count`` views, drawn without replacement, turn black (their
-    calibration stays; all of them when ``count`` >= N)."""
+    """The first ``count`` views of a random order turn black (their
+    calibration stays; all of them when ``count`` >= N): those of a lower
+    severity among them."""
     imgs = _views(results)
-    for i in rng.choice(len(imgs), min(count, len(imgs)), replace=False):
+    for i in rng.permutation(len(imgs))[:count]:
         imgs[i] = np.zeros_like(imgs[i])
 
 
@@ -113,10 +117,11 @@ def frame_lost(results: dict, prob: float,
 
 def missing_views(results: dict, count: int,
                   rng: np.random.Generator) -> None:
-    """``count`` views (at most N - 1) are dropped with every per-view
-    entry (:data:`PER_VIEW_KEYS`); ``num_views`` follows."""
+    """The first ``count`` views (at most N - 1) of a random order are
+    dropped with every per-view entry (:data:`PER_VIEW_KEYS`);
+    ``num_views`` follows."""
     num = len(_views(results))
-    drop = rng.choice(num, min(count, num - 1), replace=False)
+    drop = rng.permutation(num)[:min(count, num - 1)]
     keep = np.setdiff1d(np.arange(num), drop)
     for key in PER_VIEW_KEYS:
         if key not in results:

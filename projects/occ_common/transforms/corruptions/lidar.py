@@ -97,7 +97,8 @@ def beam_reduction(results: dict, step: int,
 
 def point_reduction(results: dict, share: float,
                     rng: np.random.Generator) -> None:
-    """Drop ``round(share * P)`` points drawn without replacement."""
+    """Drop ``round(share * P)`` points, the first of a random order
+    (those of a lower share among them)."""
     num = len(points_array(results))
     keep = np.zeros(num, bool)
     keep[rng.permutation(num)[:num - int(round(share * num))]] = True
@@ -123,11 +124,11 @@ def lidar_fog(results: dict, alpha: float,
 def lidar_crosstalk(results: dict, share: float,
                     rng: np.random.Generator) -> None:
     """Crosstalk (light of another LiDAR read as a return): a share of the
-    points, drawn without replacement, is displaced by N(0, 3 m) per
+    points, the first of a random order, is displaced by N(0, 3 m) per
     axis, as in Dong et al. (CVPR 2023); their labels become ignored."""
     data = points_array(results)
     count = int(round(share * len(data)))
-    hit = rng.choice(len(data), count, replace=False)
+    hit = rng.permutation(len(data))[:count]
     data[hit, :3] += rng.normal(0.0, 3.0, (count, 3)).astype(data.dtype)
     if 'pts_semantic_mask' in results:
         results['pts_semantic_mask'] = np.asarray(

@@ -19,8 +19,10 @@ class OccCorruption(BaseTransform):
     ``tools/analysis_tools/robustness.py`` inserts it there.
 
     Every random draw comes from a generator seeded by (sample token,
-    condition, severity, ``seed``): the same input always comes out the
-    same, in any worker and order.
+    condition, ``seed``): the same input always comes out the same, in any
+    worker and order. The severities of a condition share the draws, so a
+    higher one corrupts each sample more, never differently (see
+    :mod:`.seeding`).
 
     Two conditions need more than the loaded sample: ``beam_reduction``
     needs each point's ring index
@@ -90,8 +92,7 @@ class OccCorruption(BaseTransform):
             raise ValueError(
                 'OccCorruption needs the sample\'s token (or sample_idx) to '
                 f'seed its draws; the pipeline state has {sorted(results)}')
-        rng = corruption_rng(str(sample), self.condition, self.severity,
-                             self.seed)
+        rng = corruption_rng(str(sample), self.condition, self.seed)
         self._spec.apply(results, self.level, rng)
         # The ring indices served this transform; later filters would not
         # keep them aligned with the points.
