@@ -3,6 +3,7 @@ import copy
 from typing import Optional
 
 from ..transforms.corruptions import CONDITIONS, with_corruption
+from ..transforms.corruptions.pipeline import INPUT_LOADERS, SWEEPS_LOADER
 from .unlabelled_pipeline import innermost_dataset
 
 
@@ -65,3 +66,38 @@ def build_corrupted_dataset(cfg,
     return DATASETS.build(
         corrupted_dataset_cfg(cfg.test_dataloader.dataset, condition,
                               severity, seed, every))
+
+
+def loaded_inputs(cfg, data_root: str, ann_file: Optional[str] = None,
+                  index: int = 0) -> dict:
+    """One test sample as the config's input loaders leave it: what
+    ``OccCorruption`` receives.
+
+    The test pipeline is cut after its input loaders (key frame, ego
+    removal, sweeps with their ring indices kept, images) and the previous
+    key frame is attached (``num_frames=2``), so that every condition
+    applies; the state is returned unpacked.
+
+    Args:
+        cfg (Config): A config with a ``test_dataloader`` of this
+            library's dataset (a dataset base config will do).
+        data_root (str): Root of the info file's paths.
+        ann_file (str, optional): Info file. Defaults to the config's.
+        index (int): The sample. Defaults to 0.
+
+    Returns:
+        dict: ``img`` (uint8 views), the per-view matrices, ``points``,
+        ``points_ring``, ``prev_frames``, ``lidar_sweeps``, ``token`` ...
+    """
+    from mmengine.registry import DATASETS, init_default_scope
+
+    init_default_scope(cfg.get('default_scope', 'mmdet3d'))
+    ds_cfg = copy.deepcopy(innermost_dataset(cfg.test_dataloader.dataset))
+    ds_cfg['pipeline'] = [
+        dict(t, record_ring=True) if t['type'] == SWEEPS_LOADER else dict(t)
+        for t in ds_cfg['pipeline'] if t['type'] in INPUT_LOADERS
+    ]
+    ds_cfg.update(data_root=data_root, num_frames=2, test_mode=True)
+    if ann_file is not None:
+        ds_cfg['ann_file'] = ann_file
+    return DATASETS.build(ds_cfg)[index]

@@ -47,6 +47,18 @@ class Condition(NamedTuple):
 _IC = 'imagecorruptions'
 
 
+def levels_text(condition: Condition) -> str:
+    """The levels of severities 1..5 as the docs print them, e.g.
+    ``'0.08, 0.12, 0.18, 0.26, 0.38'`` or ``'(3, 0.1), (4, 0.5), ...'``."""
+
+    def one(level) -> str:
+        if isinstance(level, (tuple, list)):
+            return '(' + ', '.join(one(v) for v in level) + ')'
+        return f'{level:.3g}' if isinstance(level, float) else str(level)
+
+    return ', '.join(one(level) for level in condition.levels)
+
+
 def _pixels(name: str, levels, scale: str, source: str = _IC) -> Condition:
     return Condition('camera', camera.every_view(getattr(pixels, name)),
                      tuple(levels), scale, source)
