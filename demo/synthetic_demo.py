@@ -31,8 +31,8 @@ from projects.occ_common.analysis.tool_runs import (LARGE_CLASS_VOXELS,
                                                     stretched_times, tool)
 
 #: (name, config, label convention, epochs). The small configs of the
-#: learning benchmark (issue 14), trained in the demo for the epochs given
-#: here on the 24 training samples of the demo world (4 scenes x 6 key
+#: learning benchmark, trained in the demo for the epochs given here on
+#: the 24 training samples of the demo world (4 scenes x 6 key
 #: frames; the fifth scene is the held-out val split), which fit the demo's
 #: 20-minute budget on 2 idle CPU cores: 384 iterations of OccCylindrical
 #: and 240 of SDG-Fusion (about 1.45 and 1.6 s each), each a warm-up and a
@@ -40,7 +40,7 @@ from projects.occ_common.analysis.tool_runs import (LARGE_CLASS_VOXELS,
 #: 12 training samples of a 3-scene world, 144 iterations of
 #: OccCylindrical (its config's 12 epochs) left four large classes of the
 #: val scene under 5 IoU (construction vehicle 1.0, pedestrian 2.5,
-#: trailer 1.0, truck 0.0; issue 14, stop 35). The tiny configs are
+#: trailer 1.0, truck 0.0; 2026-11-26, 27454a3). The tiny configs are
 #: smoke-sized for the tests.
 MODELS = [
     ('OccCylindrical', 'configs/occ_cyl/'

@@ -21,6 +21,10 @@ ROOT = osp.dirname(osp.dirname(osp.abspath(__file__)))
 PACKAGES = ('occ_common', 'occ_cyl', 'sdg_occ')
 
 
+#: Building and installing the wheel in a fresh venv: the end-to-end tier.
+pytestmark = pytest.mark.slow
+
+
 @pytest.fixture(scope='module')
 def installed(tmp_path_factory):
     """The wheel built from a copy of the sources, installed with --target.

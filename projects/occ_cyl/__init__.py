@@ -1,5 +1,7 @@
 """OccCylindrical: multi-modal occupancy through cylindrical TPV planes.
 
+The model of OccCylindrical (Ming et al., 2025).
+
 Importing this package registers ``MultiViewImageEncoder``,
 ``LidarPointBranch``, ``SpatialGroupPooling``, ``DynamicFusion2D``,
 ``TPVPolarFusion``, ``TPVPlaneEncoder``, ``CylindricalOccHead`` and

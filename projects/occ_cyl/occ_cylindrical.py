@@ -1,4 +1,7 @@
-"""OccCylindrical: camera + LiDAR occupancy through cylindrical TPV planes."""
+"""OccCylindrical: camera + LiDAR occupancy through cylindrical TPV planes.
+
+Implements the full model of OccCylindrical (Ming et al., 2025, Fig. 2).
+"""
 from typing import Dict, List, Optional, Sequence, Tuple
 
 from mmdet3d.registry import MODELS

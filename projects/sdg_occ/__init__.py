@@ -1,5 +1,7 @@
 """SDG-OCC: semantic- and depth-guided BEV transformation with FOAD.
 
+The models of SDG-OCC (Duan et al., CVPR 2025): SDG-Fusion and SDG-KL.
+
 Importing this package registers ``SDGViewTransform``,
 ``NeighborhoodFusion``, ``FOADDistillLoss``, ``SDGBEVEncoder``,
 ``ChannelToHeightHead`` and ``SDGOcc`` in mmdet3d's ``MODELS`` registry.

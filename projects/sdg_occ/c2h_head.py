@@ -48,8 +48,8 @@ def height_labels_to_xyz(x: Tensor, num_classes: int, dz: int) -> Tensor:
     .argmax(dim=1)`` (ties go to the lowest class in both), but the argmax
     runs over the class axis of the contiguous output (stride Y * X)
     instead of a permuted copy, and only the labels, not the logits, are
-    reordered to (X, Y, Z): issue 18 measured the permuted argmax at 328
-    ms against 107 ms at paper size.
+    reordered to (X, Y, Z): the permuted argmax took 328 ms against 107 ms
+    at paper size (measured 2026-11-23, e4d6173).
 
     Args:
         x (Tensor): Predictor output, channel ``z * num_classes + cls``.

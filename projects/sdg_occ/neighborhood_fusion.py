@@ -231,7 +231,7 @@ def _attend_cells(query: Tensor, key: Tensor, value: Tensor,
 #: Bytes of key rows one block of :func:`_attend_inner` reads: small
 #: enough for a CPU core's L2 cache, where the 2 k^2 passes over the block
 #: run about twice as fast (paper size, 64 channels x 200 columns: 20 rows;
-#: issue 18 measured 267 -> 145 ms for the interior).
+#: 267 -> 145 ms for the interior, measured 2026-11-23, f7c185c).
 BLOCK_BYTES = 1 << 20
 
 

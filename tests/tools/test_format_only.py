@@ -81,6 +81,7 @@ def test_format_only_edits_only_the_test_config(tmp_path):
         if s['type'] == 'LoadOccupancyGT')
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('convention', ['occ3d', 'surroundocc'])
 def test_format_only_on_a_split_without_labels(world_copy, tmp_path,
                                                convention):

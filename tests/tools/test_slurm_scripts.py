@@ -51,6 +51,7 @@ def _run_script(tmp_path, script, *args, env=None):
     return proc, data
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('script,tool,fourth', [
     ('slurm_train.sh', 'train.py', 'work_dirs/run'),
     ('slurm_test.sh', 'test.py', 'epoch_24.pth'),

@@ -280,7 +280,8 @@ def benchmark_models(subjects: List[Subject],
     With ``args.matmul_size`` a fp32 ``torch.mm`` runs in every round too,
     so that the matmul rate the shares refer to is measured under the
     same load as the models (on a shared machine a rate measured once,
-    before the models, moved by 1.5x within minutes: issue 18).
+    before the models, moved by 1.5x within minutes: 2026-11-25,
+    ccd4029).
 
     Args:
         subjects (list[Subject]): One or two models.

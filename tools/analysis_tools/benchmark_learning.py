@@ -58,15 +58,13 @@ from projects.occ_common.evaluation import (largest_confusions,
 #: an SDG-Fusion config (the deltas of configs/sdg_occ/ablations/
 #: sdgocc-camera-lss_*).
 _CAMERA_LSS = [
-    'model.variant=camera', 'model.lidar_encoder=None', 'model.fusion=None',
+    'model.lidar_encoder=None', 'model.fusion=None',
     'model.view_transform.use_sdg=False', 'model.depth_net.seg_channels=0',
     'model.loss_seg=None'
 ]
 #: SDG-OCC Table 3's "+SDG" row (configs/sdg_occ/ablations/
 #: sdgocc-camera-sdg_*): the SDG lift without the LiDAR branch.
-_CAMERA_SDG = [
-    'model.variant=camera', 'model.lidar_encoder=None', 'model.fusion=None'
-]
+_CAMERA_SDG = ['model.lidar_encoder=None', 'model.fusion=None']
 #: Named runs: name -> (config, extra --cfg-options).
 RUNS = {
     'occcyl-tiny': ('configs/occ_cyl/'
@@ -96,8 +94,8 @@ _SDG_SMALL_NOMASK = _SDG_SMALL.replace('-nus-', '-nus-nomask-')
 RUNS.update({
     'occcyl-small': (_OCC_SMALL, []),
     'occcyl-small-nodepthsup': (_OCC_SMALL, ['model.loss_depth=None']),
-    # Issue 49: on Occ3D labels without the camera mask, scored with
-    # RayIoU beside the camera-mask mIoU.
+    # On Occ3D labels without the camera mask, scored with RayIoU beside
+    # the camera-mask mIoU.
     'occcyl-small-occ3d-nomask': (_OCC_SMALL.replace(
         'surroundocc-nus', 'occ3d-nus-nomask'), []),
     # A cylinder of twice the small config's radial and angular cells:
@@ -113,10 +111,11 @@ RUNS.update({
     # ... and with the scene turned by a random multiple of 90 degrees
     # (OccBEVAug, exact on the square grid; index 7 of the training
     # pipeline), against the layout prior of 8 training scenes whose main
-    # road all runs along the driving direction. Issue 14, stop 42: 73.44
-    # / 37.48 and 72.06 / 36.27 IoU / mIoU (seeds 0, 1) against 74.58 /
-    # 38.41 and 73.20 / 38.88 without, and the held-out cross streets
-    # no more often driveable (24.0 and 35.9 % against 20.8 and 38.2 %).
+    # road all runs along the driving direction. On 2026-11-27
+    # (2e56599): 73.44 / 37.48 and 72.06 / 36.27 IoU / mIoU (seeds 0, 1)
+    # against 74.58 / 38.41 and 73.20 / 38.88 without, and the held-out
+    # cross streets no more often driveable (24.0 and 35.9 % against
+    # 20.8 and 38.2 %).
     'occcyl-small-seg2d-nodepthsup-rot90': (
         _OCC_SMALL_SEG2D, [
             'model.loss_depth=None',
@@ -126,11 +125,11 @@ RUNS.update({
     'sdg-kl-small': (_SDG_SMALL.format('kl'), []),
     # ... distilling standardised features (FOADDistillLoss's docstring:
     # eq. 8 on the raw ones pulled 7-13x harder than the occupancy loss
-    # at initialisation; issue 47).
+    # at initialisation).
     'sdg-kl-small-norm': (_SDG_SMALL.format('kl'),
                           ['model.loss_distill.normalize=channel']),
-    # Issue 49: trained without the camera mask, scored with RayIoU beside
-    # the camera-mask mIoU.
+    # Trained without the camera mask, scored with RayIoU beside the
+    # camera-mask mIoU.
     'sdg-fusion-small-nomask': (_SDG_SMALL_NOMASK.format('fusion'), []),
     'sdg-kl-small-nomask': (_SDG_SMALL_NOMASK.format('kl'), []),
     'sdg-camera-lss-small': (_SDG_SMALL.format('fusion'), _CAMERA_LSS),
@@ -369,7 +368,8 @@ def _train_clock_hook(max_seconds: Optional[float], path: str,
             meta = checkpoint.get('meta', {})
             self.seconds = float(meta.get('train_seconds', 0.0))
             self.cpu_seconds = float(meta.get('train_cpu_seconds', 0.0))
-            self.stopped_by_time = bool(meta.get('stopped_by_time', False))
+            # Not restored: a resumed run goes on, and says it stopped by
+            # time only if its own limit stops it again.
 
         def after_train(self, runner):
             self._write(runner)
@@ -443,7 +443,8 @@ def read_curves(work_dir: str) -> Dict[str, List]:
     """
     loss, val = {}, {}
     for path in sorted(
-            glob.glob(osp.join(work_dir, '*', 'vis_data', 'scalars.json'))):
+            glob.glob(osp.join(glob.escape(work_dir), '*', 'vis_data',
+                               'scalars.json'))):
         for record in read_json_lines(path):
             step = int(record['step'])
             if 'loss' in record:
@@ -660,7 +661,7 @@ def main(argv=None):
     # The table holds every finished run of OUT, also those of earlier
     # invocations (other budgets or options: see each run's settings).
     rows = [_load_json(path) for path in sorted(
-        glob.glob(osp.join(out, 'runs', '*', RESULT)))]
+        glob.glob(osp.join(glob.escape(out), 'runs', '*', RESULT)))]
     table = format_table(rows, [
         ('train CPU time (all threads)',
          lambda r: f'{r.get("train_cpu_s", math.nan) / 60:.1f} min'),

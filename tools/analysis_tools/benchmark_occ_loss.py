@@ -3,16 +3,16 @@ the loss code of another git revision.
 
 The loss (focal, Lovasz-softmax and the two SCAL terms at every scale of
 the head, eq. 18) took most of a CPU training iteration of the small
-OccCylindrical until issue 14's stop 39. This tool builds the config's
-head, draws labels and logits of the head's scale shapes, and times the
-loss's forward + backward. With ``--ref REV`` it also loads
-``projects/occ_common/models/losses`` as it was at REV (``git show``, into
-a temporary package; its registrations are kept out of the registry except
-while the reference loss is built) and times both in alternating rounds
-(:func:`alternating_runs`; ``OMP_NUM_THREADS`` sets the threads),
-printing the medians and the largest relative difference of their loss
-terms and logit gradients. The reference is this repository's own code,
-run as it was committed.
+OccCylindrical until the faster losses of 2026-11-27 (83bfedd). This tool
+builds the config's head, draws labels and logits of the head's scale
+shapes, and times the loss's forward + backward. With ``--ref REV`` it
+also loads ``projects/occ_common/models/losses`` as it was at REV (``git
+show``, into a temporary package; its registrations are kept out of the
+registry except while the reference loss is built) and times both in
+alternating rounds (:func:`alternating_runs`; ``OMP_NUM_THREADS`` sets the
+threads), printing the medians and the largest relative difference of
+their loss terms and logit gradients. The reference is this repository's
+own code, run as it was committed.
 
 The inputs imitate a trained model: each voxel is empty with probability
 ``--empty`` (about the share of empty voxels in the synthetic world's

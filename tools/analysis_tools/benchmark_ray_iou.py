@@ -7,7 +7,7 @@ SparseOcc's protocol gives most samples) through a prediction and its
 ground truth together and count them; and, as with ``cache_gt_rays``, the
 prediction alone against cached GT hits. Prints the median wall and CPU
 time per sample (CPU time is far less sensitive to other jobs on a shared
-machine) over every sample and round; issue 49 asks for <= 0.5 s. With
+machine) over every sample and round; the target is <= 0.5 s. With
 ``--keep-freed-memory`` glibc keeps freed memory (as ``CPUMallocTuningHook``
 does), which spares the page faults of the traversal's temporaries.
 

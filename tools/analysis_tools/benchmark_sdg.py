@@ -11,18 +11,19 @@ paper-size Occ3D configs (6 cameras, 256x704 images, 0.5 m depth bins,
    feature: LSS, SDG's virtual points alone, SDG with the LSS fallback.
 2. Semantic diffusion (eqs. 1-2): feature cells without a key-frame LiDAR
    return that get a depth, with a 2D head that fits targets marking
-   unlabelled cells as class 0 ("before" issue 12) or ignoring them and
-   predicting the class the camera sees there ("after"; the synthetic
-   world's rendered classes, an oracle). The real sample has no labels:
-   there, one class everywhere gives what the geometry allows (the most
-   any semantic map could fill), also reported for the synthetic world.
+   unlabelled cells as class 0 ("before" the fixes of 2026-11-23,
+   3d5dd6a) or ignoring them and predicting the class the camera sees
+   there ("after"; the synthetic world's rendered classes, an oracle).
+   The real sample has no labels: there, one class everywhere gives what
+   the geometry allows (the most any semantic map could fill), also
+   reported for the synthetic world.
 3. FOAD regions (eqs. 5-7): N_AR, N_IR and rho = N_AR / N_IR with the
    LiDAR BEV (cells holding a point) and each lift's camera coverage, and
    the share of IR cells next to a covered cell (within the reach of
    ``camera_bev_conv``'s 3x3 kernel; the others get BN's shift only).
 4. FOAD gradient (synthetic, tiny SDG-KL config): loss_distill and the
    gradient of the camera branch for beta in {0, 1, 1000}, distilled at
-   the pooled BEV (before issue 12: the gradient does not depend on beta)
+   the pooled BEV (before 3d5dd6a: the gradient does not depend on beta)
    and at ``camera_bev_conv``'s output (after).
 5. Forward latency (``mode='predict'``) of SDG-Fusion against SDG-KL,
    median of ``--repeats`` (0 skips it).
@@ -104,7 +105,7 @@ def real_sample(cfg, folder):
     Returns:
         dict: ``inputs`` and ``data_samples`` as a dataset item.
     """
-    (pkl, ) = glob.glob(osp.join(folder, '*.pkl'))
+    (pkl, ) = glob.glob(osp.join(glob.escape(folder), '*.pkl'))
     # A downloaded info file: the restricted unpickler, as everywhere.
     info = load_info_file(pkl)['data_list'][0]
     lidar = info['lidar_points']

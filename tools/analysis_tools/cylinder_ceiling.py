@@ -13,13 +13,14 @@ do not vote; ties go to the lower label) and scores that against the
 ground truth with the metric's rules: the IoU / mIoU a model would reach
 if each cell could hold one class. A coarse cylinder merges a far
 pedestrian with the road around it; the score shows, per class, what a
-shape costs before any learning (issue 14: the small config's 64 x 128 x
-16 cells keep 69.3 mIoU of the held-out synthetic scenes, 128 x 256 x 16
-keep 89.5). Without ``--shapes`` the config's own cylinder is measured;
-each shape is given as ``RxThetaxZ`` and keeps the config's radius fit and
-clamping. The model samples its planes by linear interpolation, so a
-trained model is not strictly bounded by this nearest-cell score, but a
-class far under it cannot be blamed on the cylinder.
+shape costs before any learning (2026-11-27, ad94fac: the small config's
+64 x 128 x 16 cells keep 69.3 mIoU of the held-out synthetic scenes, 128 x
+256 x 16 keep 89.5). Without ``--shapes`` the config's own cylinder is
+measured; each shape is given as ``RxThetaxZ`` and keeps the config's
+radius fit and clamping. The model samples its planes by linear
+interpolation, so a trained model is not strictly bounded by this
+nearest-cell score, but a class far under it cannot be blamed on the
+cylinder.
 """
 import argparse
 import json

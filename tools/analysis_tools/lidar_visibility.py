@@ -12,8 +12,9 @@ removed), the share within ``--near`` metres of the working frame's origin
 library keeps points and grid in one working frame (LiDAR for SurroundOcc,
 ego for Occ3D), so a point's voxel is ``floor((p - range_min) /
 voxel_size)``. A class whose voxels rarely hold a return is one the model
-must infer from the cameras and from shape: issue 14 used it to tell why
-the small OccCylindrical misses bicycles.
+must infer from the cameras and from shape: the learning benchmark used
+it to tell why the small OccCylindrical misses bicycles (2026-11-26,
+a62c1e8).
 """
 import argparse
 import json

@@ -76,6 +76,7 @@ def test_visualizer_without_dataset_meta_uses_its_convention():
         OccLocalVisualizer(name='occ_vis_bad', convention='kitti')
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not osp.isfile(BROWSE),
                     reason=f'mmdet3d ships no {BROWSE}')
 def test_mmdet3d_browse_dataset_script_runs(converted_tiny_world, tmp_path):

@@ -21,10 +21,11 @@ the gathered gradient), all alive at once. At OccCylindrical's Table VI
 cylinder (480 x 368 x 32, M = 8, 64 channels) one (R, Theta) plane is
 361 MiB and the occupied camera voxels about as much, so that backward
 peaked ~3 GB above its inputs and set the training iteration's peak
-memory (issue 18). This one keeps one output-sized float tensor (the tie
-counts, overwritten by the shared gradient), a boolean mask of the rows at
-their cell's maximum (a quarter of the input's bytes) and the gradient it
-returns; the float temporaries are made in chunks of rows.
+memory (measured 2026-11-25, 1cff775). This one keeps one output-sized
+float tensor (the tie counts, overwritten by the shared gradient), a
+boolean mask of the rows at their cell's maximum (a quarter of the input's
+bytes) and the gradient it returns; the float temporaries are made in
+chunks of rows.
 """
 import warnings
 

@@ -41,6 +41,7 @@ def _faults(mode):
     return proc.stdout, int(proc.stdout.split('faults')[-1])
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(glibc() is None, reason='needs glibc (mallopt)')
 def test_freed_memory_is_reused_not_faulted_in_again():
     """64 MiB is 16,384 pages of 4 KiB. glibc's default serves it with its

@@ -88,6 +88,7 @@ def _files(work_dir):
     return sorted(os.listdir(work_dir))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('fault, at_call', [('sigkill', 2), ('sigint', 2),
                                             ('enospc', 2),
                                             ('sigkill_after', 1)])
