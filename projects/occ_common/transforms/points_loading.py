@@ -313,6 +313,12 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
         check_ring (bool): Refuse a ``load_dim=5`` sweep whose fifth
             values are not ring indices (another dtype or point width).
             Defaults to True.
+        record_ring (bool): Keep every merged point's ring (beam) index,
+            which the time lag replaces in ``points``, as
+            ``points_ring``, for a transform right after this one that
+            needs it (``OccCorruption``'s beam reduction, which removes
+            it again: later filters would not keep it aligned). Defaults
+            to False.
         **kwargs: ``backend_args``, ``pad_empty_sweeps``, ``remove_close``,
             ``test_mode`` of the parent.
 
@@ -337,6 +343,8 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
 
     - points_time_dim (int | None): Column of the time lag in ``points``
       (None if ``use_dim`` drops it).
+    - points_ring (np.ndarray): Shape (P_key + P_sweeps,), int16, the ring
+      index of every point; only with ``record_ring``.
     """
 
     def __init__(self,
@@ -346,6 +354,7 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
                  ignore_index: int = 255,
                  ego_box: Optional[Sequence[float]] = None,
                  check_ring: bool = True,
+                 record_ring: bool = False,
                  **kwargs) -> None:
         use_dim = list(range(use_dim)) if isinstance(use_dim, int) \
             else list(use_dim)
@@ -364,6 +373,20 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
         self.ignore_index = ignore_index
         self.ego_box = None if ego_box is None else check_ego_box(ego_box)
         self.check_ring = check_ring
+        self.record_ring = record_ring
+
+    def _ring(self, points: np.ndarray, path) -> Optional[np.ndarray]:
+        """A copy of the ring column of ``points`` with ``record_ring``
+        (None without), refusing files that have none."""
+        if not self.record_ring:
+            return None
+        if points.shape[1] <= RING_COLUMN:
+            raise ValueError(
+                f'{self.__class__.__name__}(record_ring=True) needs the ring '
+                f'index (the fifth value of a point), but {path} holds '
+                f'{points.shape[1]} values a point (a LiDAR without ring '
+                'index): a transform that drops beams cannot run on it')
+        return points[:, RING_COLUMN].copy()
 
     @staticmethod
     def sweep_to_key(sweep: dict) -> np.ndarray:
@@ -411,14 +434,23 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
                 f'least 4 columns (x, y, z, intensity; column 4 becomes the '
                 f'time lag), got {points.tensor.shape[1]} for '
                 f'{results.get("lidar_path")}')
+        key_ring = self._ring(points.tensor.numpy(),
+                              results.get('lidar_path'))
         key = with_time_lag(points.tensor.numpy(), 0.0)
         load_dim = self.load_dim or int(results.get(
             'num_pts_feats', NUM_POINT_FEATS))
-        parts = [key]
+        parts, rings = [key], [key_ring]
         sweeps = results.get('lidar_sweeps')
         if sweeps is None:
             if self.pad_empty_sweeps:
-                pad = self._remove_close(key) if self.remove_close else key
+                # The ring rides along as a last column through the filter.
+                pad = key if key_ring is None else np.column_stack(
+                    [key, key_ring])
+                if self.remove_close:
+                    pad = self._remove_close(pad)
+                if key_ring is not None:
+                    rings += [pad[:, -1]] * self.sweeps_num
+                    pad = pad[:, :-1]
                 parts += [pad] * self.sweeps_num
         else:
             token = results.get('token', '?')
@@ -445,6 +477,7 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
                         self.ego_box)
                 mat = self.sweep_to_key(sweep).astype(np.float32)
                 arr[:, :3] = arr[:, :3] @ mat[:3, :3].T + mat[:3, 3]
+                rings.append(self._ring(arr, path))
                 parts.append(with_time_lag(arr, key_time - sweep_time))
         num_key = len(points)
         if key.shape[1] != points.tensor.shape[1]:  # time lag appended
@@ -453,6 +486,8 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
         # Tells later transforms which column separates key frame / sweeps.
         results['points_time_dim'] = self.use_dim.index(4) \
             if 4 in self.use_dim else None
+        if self.record_ring:
+            results['points_ring'] = np.concatenate(rings).astype(np.int16)
         if 'pts_semantic_mask' in results:
             key_mask = np.asarray(results['pts_semantic_mask'])
             pad = np.full(len(results['points']) - num_key, self.ignore_index,
@@ -465,4 +500,5 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
         return (f'{self.__class__.__name__}(sweeps_num={self.sweeps_num}, '
                 f'load_dim={self.load_dim}, use_dim={self.use_dim}, '
                 f'remove_close={self.remove_close}, '
-                f'ego_box={self.ego_box}, test_mode={self.test_mode})')
+                f'ego_box={self.ego_box}, test_mode={self.test_mode}, '
+                f'record_ring={self.record_ring})')

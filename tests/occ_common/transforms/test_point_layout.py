@@ -74,3 +74,35 @@ def test_sweeps_of_a_lidar_without_ring_index(tmp_path):
     np.testing.assert_array_equal(merged[4], merged[5])
     with pytest.raises(ValueError, match='load_dim >= 4'):
         LoadOccPointsFromMultiSweeps(load_dim=3)
+
+
+def test_rings_are_kept_where_the_files_have_them(tmp_path):
+    """keep_rings (the pipeline of a corruption that drops beams): the
+    key-frame loader keeps column 4 and the sweeps loader records the
+    rings of 5-value files (7, 8 for the key frame and the sweep alike,
+    the lag in column 4); a LiDAR without ring index is refused, naming
+    the sample."""
+    from projects.occ_common.transforms.corruptions.pipeline import keep_rings
+    pipeline = [dict(type='LoadOccPointsFromFile', coord_type='LIDAR',
+                     load_dim=None, use_dim=4),
+                dict(type='LoadOccPointsFromMultiSweeps', load_dim=None,
+                     test_mode=True)]
+    keep_rings(pipeline)
+    assert pipeline[0]['use_dim'] == 5 and pipeline[1]['record_ring']
+    key_load, sweep_load = (
+        cls(**{k: v for k, v in t.items() if k != 'type'})
+        for cls, t in zip((LoadOccPointsFromFile,
+                           LoadOccPointsFromMultiSweeps), pipeline))
+    for dims, rows in ((5, np.c_[ROWS, [7, 8]]), (4, ROWS)):
+        key = _write(tmp_path / f'key{dims}.bin', rows)
+        sweeps = [dict(lidar_points=dict(
+            lidar_path=_write(tmp_path / f'sweep{dims}.bin', rows),
+            sensor2lidar=np.eye(4)), timestamp=9.95)]
+        if dims == 4:
+            with pytest.raises(ValueError, match=r'sample t has 4 values'):
+                key_load(_sample(key, dims, sweeps))
+            continue
+        out = sweep_load(key_load(_sample(key, dims, sweeps)))
+        np.testing.assert_array_equal(out['points_ring'], [7, 8, 7, 8])
+        np.testing.assert_allclose(out['points'].tensor.numpy()[:, 4],
+                                   [0, 0, 0.05, 0.05], atol=1e-6)
