@@ -30,7 +30,7 @@ def keep_rings(pipeline: List[dict]) -> None:
     fifth value too, the ring, as column 4 (which the sweeps loader
     records, then overwrites with the time lag), and the sweeps loader
     records every merged point's ring (``record_ring=True``). On files of
-    four values a point the key-frame loader then fails, naming the file.
+    four values a point the key-frame loader then fails, naming the sample.
 
     Args:
         pipeline (list[dict]): Transform configs, changed in place.
