@@ -25,7 +25,6 @@ gradient. Forward values of the two paths are bitwise equal; gradients are
 equal up to the order of floating-point summation (bitwise when the
 arithmetic is exact).
 """
-import warnings
 from typing import Iterator, Tuple
 
 import torch
@@ -34,6 +33,7 @@ from torch.autograd import Function
 from torch.autograd.function import once_differentiable
 
 from projects.occ_common.models.layers import cell_max
+from projects.occ_common.models.layers.cell_max import quiet_index_reduce
 from projects.occ_common.utils.device_path import check_index_range
 
 
@@ -201,8 +201,7 @@ class _LiftPoints:
         # than scatter_reduce_ and needs no (points, C) index tensor.
         vmax = self.depth.new_full((num_voxels + 1, self.channels),
                                    float('-inf'))
-        with warnings.catch_warnings():
-            warnings.filterwarnings('ignore', message='index_reduce')
+        with quiet_index_reduce():
             for feats, vox, _ in self:
                 vmax.index_reduce_(0, vox, feats, 'amax')
         return vmax
@@ -215,8 +214,7 @@ class _LiftPoints:
         """
         winner = torch.full(
             vmax.shape, self.total, dtype=id_dtype, device=vmax.device)
-        with warnings.catch_warnings():
-            warnings.filterwarnings('ignore', message='index_reduce')
+        with quiet_index_reduce():
             for feats, vox, first in self:
                 ids = torch.arange(
                     first,

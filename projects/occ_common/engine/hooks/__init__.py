@@ -14,11 +14,13 @@ from .non_finite_loss_hook import NonFiniteLossError, NonFiniteLossHook
 from .occ_visualization_hook import OccVisualizationHook
 from .random_state_hook import RandomStateHook
 from .safe_checkpoint_hook import SafeCheckpointHook
+from .torch_compile_hook import TorchCompileHook
 from .weights_only_checkpoint_hook import WeightsOnlyCheckpointHook
 
 __all__ = [
     'AugmentationSeedHook', 'CheckpointMatchHook',
     'CheckpointRecoveryHook', 'CPUMallocTuningHook', 'MainProcessLoggerHook',
     'NonFiniteLossError', 'NonFiniteLossHook', 'OccVisualizationHook',
-    'RandomStateHook', 'SafeCheckpointHook', 'WeightsOnlyCheckpointHook'
+    'RandomStateHook', 'SafeCheckpointHook', 'TorchCompileHook',
+    'WeightsOnlyCheckpointHook'
 ]
