@@ -16,11 +16,12 @@ from .random_state_hook import RandomStateHook
 from .safe_checkpoint_hook import SafeCheckpointHook
 from .torch_compile_hook import TorchCompileHook
 from .weights_only_checkpoint_hook import WeightsOnlyCheckpointHook
+from .work_dir_lock_hook import WorkDirLockHook
 
 __all__ = [
     'AugmentationSeedHook', 'CheckpointMatchHook',
     'CheckpointRecoveryHook', 'CPUMallocTuningHook', 'MainProcessLoggerHook',
     'NonFiniteLossError', 'NonFiniteLossHook', 'OccVisualizationHook',
     'RandomStateHook', 'SafeCheckpointHook', 'TorchCompileHook',
-    'WeightsOnlyCheckpointHook'
+    'WeightsOnlyCheckpointHook', 'WorkDirLockHook'
 ]
