@@ -79,8 +79,12 @@ class CellMaxFunction(Function):
     def backward(ctx, grad_out: Tensor):
         feats, cell, out = ctx.saved_tensors
         grad_out = grad_out.contiguous()
-        chunks = [(start, min(start + CHUNK_ROWS, feats.shape[0]))
-                  for start in range(0, feats.shape[0], CHUNK_ROWS)]
+        # Compiled code makes no chunks: their number would fix the row
+        # count (a dynamic size under torch.compile) to the one traced,
+        # and the compiler fuses the temporaries away anyway.
+        chunks = ([(0, feats.shape[0])] if torch.compiler.is_compiling()
+                  else [(start, min(start + CHUNK_ROWS, feats.shape[0]))
+                        for start in range(0, feats.shape[0], CHUNK_ROWS)])
         at_max = torch.empty_like(feats, dtype=torch.bool)
         for start, end in chunks:
             torch.eq(feats[start:end],
