@@ -21,7 +21,6 @@ broke on before the compiled path followed the GPU's).
 """
 import argparse
 import contextlib
-import copy
 import json
 from typing import Dict, List
 
@@ -87,15 +86,18 @@ def check_phase(model, cfg, phase: str, args) -> Dict:
     """Breaks (and recompilations) of one phase."""
     train = phase == 'train'
     call = phase_call(model, phase)
-    data = preprocessed(model, cfg, args.batch, args.num_points, train)
-    report = explain_breaks(call, copy.deepcopy(data) if train else data)
+    # Fresh batches for every call: a prediction writes into its samples.
+    report = explain_breaks(
+        call, preprocessed(model, cfg, args.batch, args.num_points, train))
     result = dict(phase=phase, graphs=report.graphs,
                   breaks=len(report.breaks), ops=report.ops,
                   sites=report.by_site())
     if args.recompile:
-        other = preprocessed(model, cfg, args.batch,
-                             args.num_points * 3 // 4, train, seed=1)
-        recompiles = count_recompiles(call, [data, other])
+        recompiles = count_recompiles(call, [
+            preprocessed(model, cfg, args.batch, args.num_points, train),
+            preprocessed(model, cfg, args.batch, args.num_points * 3 // 4,
+                         train, seed=1)
+        ])
         result.update(graphs_per_call=recompiles.graphs_per_call,
                       recompiles=recompiles.recompiles,
                       recompile_reasons=recompiles.reasons)
