@@ -1,6 +1,6 @@
 """Input checks and flattening shared by the occupancy losses."""
 import os
-from typing import Optional, Tuple, Union
+from typing import Optional, Tuple
 
 import torch
 import torch.nn.functional as F
@@ -118,12 +118,6 @@ class SupervisedVoxels:
         self.mask = mask
         self._log_probs: Optional[Tensor] = None
         self._probs: Optional[Tensor] = None
-
-    @property
-    def count(self) -> Union[int, Tensor]:
-        """The number of supervised voxels: an int, or with ``mask`` a long
-        scalar on the device."""
-        return self.labels.numel() if self.mask is None else self.mask.sum()
 
     def only(self, values: Tensor) -> Tensor:
         """``values`` (M, ...) with 0 at the voxels that are not supervised
