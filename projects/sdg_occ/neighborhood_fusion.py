@@ -181,9 +181,11 @@ def _border_cells(height: int, width: int, kernel_size: int, border: str,
         outside = torch.ones(height, width, dtype=torch.bool)
     # The border cells in row-major order, as nonzero lists them, with a
     # count known from the shape (nonzero's is data-dependent: a graph
-    # break under torch.compile): a stable sort puts them first.
-    flat = torch.sort((~outside).flatten().to(torch.uint8),
-                      stable=True)[1][:num]
+    # break under torch.compile): sorted by (interior, index), keys all
+    # distinct, so no stable sort is needed (ONNX has none).
+    index = torch.arange(height * width)
+    flat = torch.sort((~outside).flatten().long() * (height * width) +
+                      index)[1][:num]
     cell_rows, cell_cols = flat // width, flat % width
     key_rows, row_in, bias_rows = _window_slots(height, kernel_size, border,
                                                 cell_rows)
