@@ -16,6 +16,14 @@ the point count of every cloud dynamic before each step instead
 compiled step), so the first graph already takes any count. Images, grids
 and labels keep their static shapes.
 
+The data preprocessor runs eagerly (``torch.compiler.disable``, one graph
+break at the start of each step): mmdet3d's ``Det3DDataPreprocessor``
+writes ``batch_input_shape`` and ``pad_shape`` with mmengine's
+``set_metainfo``, which deep-copies the samples' numpy metainfo, and
+Dynamo cannot trace that copy (a hard error, not a break: found
+2026-11-28 by ``tools/train.py ... compile.backend=eager``). The model's
+forward after it is compiled.
+
 Without ``compile`` in the config the hook does nothing.
 """
 from typing import Optional
@@ -102,6 +110,20 @@ class TorchCompileHook(Hook):
         if self.mark_dynamic and data_batch is not None and \
                 self._options(runner) is not None:
             mark_dynamic_points(data_batch)
+
+    def before_run(self, runner) -> None:
+        """Run the data preprocessor eagerly when compiling (see the
+        module docstring); mmengine compiles ``train_step`` after this, on
+        its first call."""
+        if self._options(runner) is None:
+            return
+        model = getattr(runner.model, 'module', runner.model)
+        preprocessor = getattr(model, 'data_preprocessor', None)
+        if preprocessor is not None and \
+                not getattr(preprocessor, '_occ_eager', False):
+            preprocessor.forward = torch.compiler.disable(
+                preprocessor.forward)
+            preprocessor._occ_eager = True
 
     def before_val(self, runner) -> None:
         """Compile ``val_step``, once."""

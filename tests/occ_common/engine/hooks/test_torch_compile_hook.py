@@ -80,3 +80,34 @@ def test_hook_compiles_test_and_val_steps_once_when_asked():
     TorchCompileHook().before_test_iter(plain, 0,
                                         dict(inputs=dict(points=points)))
     assert not hasattr(points[0], '_dynamo_weak_dynamic_indices')
+
+
+def test_data_preprocessor_runs_eagerly_only_when_compiling():
+    """mmdet3d's preprocessor deep-copies numpy metainfo, which Dynamo
+    cannot trace: with ``compile`` the hook makes its forward an eager
+    island (traced as a break, not into the graph; values unchanged: 3 + 1
+    = 4), once; without ``compile`` the forward is left alone."""
+    from projects.occ_common.analysis.compile_check import explain_breaks
+
+    class Preprocessor(torch.nn.Module):
+
+        def forward(self, x):
+            return x + 1
+
+    runner = _runner(dict(backend='eager'))
+    runner.model.data_preprocessor = Preprocessor()
+    TorchCompileHook().before_run(runner)
+    TorchCompileHook().before_run(runner)
+    pre = runner.model.data_preprocessor
+    assert pre(torch.tensor(3.0)).item() == 4.0
+
+    def step(x):
+        return pre(x * 2) * 3
+
+    assert len(explain_breaks(step, torch.ones(2)).breaks) == 1
+    plain = _runner(None)
+    plain.model.data_preprocessor = Preprocessor()
+    TorchCompileHook().before_run(plain)
+    pre = plain.model.data_preprocessor
+    assert not getattr(pre, '_occ_eager', False)
+    assert len(explain_breaks(step, torch.ones(2)).breaks) == 0
