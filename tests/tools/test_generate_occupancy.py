@@ -132,3 +132,33 @@ def test_rerun_skips_finished_scenes_and_redoes_a_killed_one(tmp_path):
                            progress=False)
     assert generate_occupancy(root, 'v1.0-mini', out, LabelConfig(),
                               overwrite=True, progress=False)['files'] == 2
+
+
+def test_missing_sweep_is_reported_missing_key_frame_stops(tmp_path):
+    """A keyframe-only download: the sweep between the key frames is
+    gone. The labels are made from the rest (the wall the first key frame
+    saw is still there, 6 voxels) and the missing file is reported; a
+    missing key frame stops the scene, naming the file."""
+    wall = np.stack([np.full(20, 10.2), np.linspace(-1, 1, 20),
+                     np.full(20, 1.0)], axis=1)
+    root = write_hand_built_scene(str(tmp_path / 'root'), [
+        HandSweep(0.0, (0, 0), wall, key=True, raw_class=28),
+        HandSweep(0.05, (0, 0), wall),
+        HandSweep(0.1, (0, 0), wall, key=True, raw_class=28)])
+    sweep = next(osp.join(root, 'sweeps', 'LIDAR_TOP', f) for f in
+                 os.listdir(osp.join(root, 'sweeps', 'LIDAR_TOP')))
+    os.remove(sweep)
+    cfg = LabelConfig(no_return_range=0.0)
+    with pytest.warns(UserWarning, match='missing LiDAR sweeps'):
+        summary = generate_occupancy(root, 'v1.0-mini', str(tmp_path / 'a'),
+                                     cfg, progress=False)
+    assert summary['key_frames'] == 2
+    label = next(osp.join(d, f) for d, _, files in os.walk(
+        tmp_path / 'a' / 'gts') for f in files)
+    assert (np.load(label)['semantics'] == 15).sum() == 6
+    key = next(osp.join(root, 'samples', 'LIDAR_TOP', f) for f in
+               os.listdir(osp.join(root, 'samples', 'LIDAR_TOP')))
+    os.remove(key)
+    with pytest.raises(FileNotFoundError, match='key frame LiDAR file'):
+        generate_occupancy(root, 'v1.0-mini', str(tmp_path / 'b'), cfg,
+                           progress=False)

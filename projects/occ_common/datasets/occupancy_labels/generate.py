@@ -56,9 +56,11 @@ def _scene_job(name: str) -> dict:
     """Label one scene and mark it done (runs in a worker)."""
     nusc, root = _WORKER['nusc'], _WORKER['root']
     out_dir, cfg = _WORKER['out'], _WORKER['cfg']
-    scene = next(s for s in nusc.scene if s['name'] == name)
-    result = write_scene(read_scene(nusc, scene, root), out_dir, cfg)
+    sequence = read_scene(
+        nusc, next(s for s in nusc.scene if s['name'] == name), root)
+    result = write_scene(sequence, out_dir, cfg)
     result['files'] = [osp.relpath(p, out_dir) for p in result['files']]
+    result['missing'] = sequence.missing
     with open(_done_path(out_dir, name), 'w') as f:
         json.dump(result, f)
     return result
@@ -142,6 +144,9 @@ def generate_occupancy(root_path: str,
             summary['scenes'].append(result['scene'])
             summary['key_frames'] += result['key_frames']
             summary['files'] += len(result['files'])
+            for path in result['missing']:
+                report.add('missing LiDAR sweeps (labels made from the '
+                           'others)', f'{result["scene"]}: {path}')
             if bar is not None:
                 bar.update()
     finally:

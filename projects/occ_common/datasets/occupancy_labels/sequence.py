@@ -153,11 +153,14 @@ class SceneSequence:
         sweeps (List[Sweep]): All LiDAR sweeps, in time order.
         key_frames (List[KeyFrame]): The samples, in time order.
         tracks (Dict[str, Track]): Annotated instances by token.
+        missing (List[str]): Sweep files (not key frames) the tables list
+            but the root lacks (a keyframe-only download); left out.
     """
     name: str
     sweeps: List[Sweep]
     key_frames: List[KeyFrame]
     tracks: Dict[str, Track]
+    missing: List[str] = field(default_factory=list)
 
 
 def read_points(path: str) -> np.ndarray:
@@ -261,6 +264,8 @@ def read_scene(nusc, scene: dict, root: str) -> SceneSequence:
     Raises:
         ValueError: If the scene has no sample or its first sample has no
             LIDAR_TOP data.
+        FileNotFoundError: If a key frame's LiDAR file is missing (a
+            missing sweep between key frames is only left out).
     """
     name = plain_name(scene['name'], 'scene name')
     token = scene['first_sample_token']
@@ -272,12 +277,22 @@ def read_scene(nusc, scene: dict, root: str) -> SceneSequence:
     sd = nusc.get('sample_data', first['data']['LIDAR_TOP'])
     while sd['prev']:
         sd = nusc.get('sample_data', sd['prev'])
-    sweeps, key_frames, tracks = [], [], {}
+    sweeps, key_frames, tracks, missing = [], [], {}, []
     while True:
+        path = osp.join(root, sd['filename'])
+        if not osp.isfile(path):
+            if sd['is_key_frame']:
+                raise FileNotFoundError(
+                    f'scene {name}: key frame LiDAR file not found: {path}')
+            missing.append(path)
+            if not sd['next']:
+                break
+            sd = nusc.get('sample_data', sd['next'])
+            continue
         lidar2global, ego2global, cs = _sensor2global(nusc, sd)
         sweeps.append(Sweep(
             token=sd['token'], timestamp=sd['timestamp'] / 1e6,
-            path=osp.join(root, sd['filename']), lidar2global=lidar2global,
+            path=path, lidar2global=lidar2global,
             ego2global=ego2global,
             lidarseg_path=(_lidarseg_path(nusc, root, sd['token'])
                            if sd['is_key_frame'] else None)))
@@ -303,7 +318,8 @@ def read_scene(nusc, scene: dict, root: str) -> SceneSequence:
         sd = nusc.get('sample_data', sd['next'])
     return SceneSequence(
         name=name, sweeps=sweeps, key_frames=key_frames,
-        tracks={tok: _track(tok, rows) for tok, rows in tracks.items()})
+        tracks={tok: _track(tok, rows) for tok, rows in tracks.items()},
+        missing=missing)
 
 
 def _track(token: str, rows: list) -> Track:
