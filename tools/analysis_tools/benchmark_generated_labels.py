@@ -36,10 +36,9 @@ import time
 
 from projects.occ_common.analysis.tool_runs import pct
 from projects.occ_common.datasets.nuscenes_classes import OCC3D_CLASS_NAMES
-from projects.occ_common.datasets.occupancy_labels import (
-    LabelConfig, generate_occupancy)
-from projects.occ_common.datasets.occupancy_labels.generate import \
-    PROGRESS_DIR
+from projects.occ_common.datasets.occupancy_labels import (LabelConfig,
+                                                           generate_occupancy)
+from projects.occ_common.datasets.occupancy_labels.generate import PROGRESS_DIR
 from projects.occ_common.datasets.occupancy_labels.writers import (
     OCC3D_DIR, SURROUNDOCC_DIR)
 from projects.occ_common.evaluation.label_quality import LabelQuality
