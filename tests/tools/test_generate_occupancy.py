@@ -162,3 +162,27 @@ def test_missing_sweep_is_reported_missing_key_frame_stops(tmp_path):
     with pytest.raises(FileNotFoundError, match='key frame LiDAR file'):
         generate_occupancy(root, 'v1.0-mini', str(tmp_path / 'b'), cfg,
                            progress=False)
+
+
+@pytest.mark.slow
+def test_workers_write_what_one_process_writes(tmp_path):
+    """Two scenes labelled by two worker processes: the same bytes per
+    label as one process writes (a clear day and a rainy night)."""
+    from projects.occ_common.testing.tiny_world import make_tiny_world
+    root = make_tiny_world(str(tmp_path / 'world'), num_scenes=2,
+                           image_size=(64, 36))
+    cfg = LabelConfig()
+    both = generate_occupancy(root, 'v1.0-mini', str(tmp_path / 'two'), cfg,
+                              workers=2, progress=False)
+    assert sorted(both['scenes']) == ['scene-0001', 'scene-0002']
+    one = generate_occupancy(root, 'v1.0-mini', str(tmp_path / 'one'), cfg,
+                             scenes=['scene-0002'], progress=False)
+    assert one['files'] == 4
+    for folder, _, files in os.walk(tmp_path / 'one'):
+        for name in files:
+            if name.endswith(('.npz', '.npy')):
+                mine = osp.join(folder, name)
+                other = mine.replace(str(tmp_path / 'one'),
+                                     str(tmp_path / 'two'))
+                with open(mine, 'rb') as a, open(other, 'rb') as b:
+                    assert a.read() == b.read(), name
