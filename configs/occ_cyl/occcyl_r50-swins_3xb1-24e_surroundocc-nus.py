@@ -1,38 +1,26 @@
-# OccCylindrical (camera + LiDAR) on SurroundOcc-nuScenes as in the paper:
-# the model and schedule of _base_/occcyl_r50-swins.py, 1600x900 images,
-# 10 LiDAR frames (the key frame + 9 sweeps), 3 GPUs x 1 sample.
-_base_ = [
-    '../_base_/datasets/surroundocc-nus.py', '../_base_/default_runtime.py',
-    './_base_/occcyl_r50-swins.py'
-]
+# OccCylindrical (camera + LiDAR) on SurroundOcc-nuScenes as in the paper: the
+# model, schedule and inputs of _base_/occcyl_r50-swins.py (1600x900 images,
+# the key frame + 9 sweeps, the lineage's augmentation), 3 GPUs x 1 sample.
+_base_ = ['../_base_/datasets/nus-occ-common.py',
+          '../_base_/datasets/surroundocc-task.py',
+          '../_base_/default_runtime.py', './_base_/occcyl_r50-swins.py']
 
-custom_imports = dict(
-    imports=['projects.occ_common', 'projects.occ_cyl'],
-    allow_failed_imports=False)
-
-# The coupled values, from the dataset base.
 model = _base_.occ_task
-
-# The dataset base crops to BEVDet's 256x704; the paper feeds 1600x900.
-img_size = (900, 1600)
-# "10 LiDAR sweeps": the authors' OccFusion code loads the key frame and 9
-# sweeps (LoadPointsFromMultiSweeps(sweeps_num=9)), 10 frames in all.
-sweeps_num = 9
-_paper_inputs = dict(
-    MultiViewImageAug=dict(final_size=img_size),
-    LoadOccPointsFromMultiSweeps=dict(sweeps_num=sweeps_num))
-# The lineage's photometric-only augmentation (the model base says why).
-_train_aug = _base_.lineage_train_aug
+# The dataset base's pipelines around the labels, with the paper's inputs
+# and the lineage's photometric-only training augmentation.
+_inputs, _aug = _base_.paper_inputs, _base_.lineage_train_aug
+img_size = _inputs.MultiViewImageAug.final_size
+sweeps_num = _inputs.LoadOccPointsFromMultiSweeps.sweeps_num
 train_pipeline = [
-    step for t in _base_.train_pipeline for step in
-    [dict(t, **_paper_inputs.get(t['type'], {}),
-          **_train_aug.get(t['type'], {}))] +
-    ([_base_.lineage_photometric] if t['type'] == 'MultiViewImageAug' else [])
-]
+    step for t in _base_.train_inputs + _base_._labels + _base_.train_targets +
+    _base_._crop_and_pack for step in
+    [dict(t, **_inputs.get(t['type'], {}), **_aug.get(t['type'], {}))] +
+    ([_base_.lineage_photometric] if t['type'] == 'MultiViewImageAug' else [])]
 test_pipeline = [
-    dict(t, **_paper_inputs.get(t['type'], {}))
-    for t in _base_.test_pipeline
-]
-train_dataloader = dict(dataset=dict(pipeline=train_pipeline))
-val_dataloader = dict(dataset=dict(pipeline=test_pipeline))
-test_dataloader = val_dataloader
+    dict(t, **_inputs.get(t['type'], {})) for t in _base_.test_inputs +
+    _base_._labels + _base_.test_targets + _base_._crop_and_pack]
+train_dataloader = dict(
+    dataset=dict(_base_._occ_dataset, pipeline=train_pipeline))
+val_dataloader = test_dataloader = dict(
+    dataset=dict(_base_._occ_dataset, pipeline=test_pipeline))
+val_evaluator = test_evaluator = _base_._occ_metric

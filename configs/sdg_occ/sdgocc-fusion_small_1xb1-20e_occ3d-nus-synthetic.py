@@ -1,42 +1,6 @@
-# A small SDG-Fusion for the held-out learning benchmark
-# (tools/analysis_tools/benchmark_learning.py): the tiny model with the key
-# frame and 9
-# LiDAR sweeps, trained with a warm-up and a cosine decay, sized so that 2
-# CPU cores train it in about 40 minutes (20 epochs of the benchmark
-# world's 64 training samples). The learning benchmark's hour stretches
-# this schedule to 1760 iterations (`--iters 1760`): on these 1280 the
-# mIoU depends on the seed (42.6 / 35.9), on 1760 every seed measured
-# passes 40 (docs/reports/learning_benchmark.md).
-#
-# Widths stay the tiny ones: at twice them (1.66 M parameters, 2.1 s an
-# iteration) the same 21 CPU-minutes scored 75.7 / 28.7 (IoU / mIoU on the
-# held-out scenes) against 76.6 / 26.5 for the tiny widths, which then go on
-# to 77.4 / 29.0 in the time the wide model needs for fewer iterations.
-_base_ = ['./sdgocc-fusion_tiny_1xb1-6e_occ3d-nus-synthetic.py']
+# The small SDG-Fusion of the held-out learning benchmark
+# (_base_/sdgocc-fusion_small_occ3d-nus-synthetic.py says how it is sized).
+_base_ = ['./_base_/sdgocc-fusion_small_occ3d-nus-synthetic.py',
+          '../_base_/cpu_smoke_runtime.py']
 
-# Sweeps: 9 of the 10 the paper merges. The tiny config's key-frame-only
-# cloud leaves the sparse LiDAR branch ~10x fewer points; the sweeps cost
-# +0.15 s an iteration here and gave 65.4 / 19.6 against 63.6 / 13.6
-# without them after 300 iterations (issue 14's pilots).
-_more = dict(LoadOccPointsFromMultiSweeps=dict(sweeps_num=9))
-train_pipeline = [dict(t, **_more.get(t['type'], {}))
-                  for t in _base_.train_pipeline]
-test_pipeline = [dict(t, **_more.get(t['type'], {}))
-                 for t in _base_.test_pipeline]
-train_dataloader = dict(dataset=dict(pipeline=train_pipeline))
-val_dataloader = dict(dataset=dict(pipeline=test_pipeline))
-test_dataloader = val_dataloader
-
-max_epochs = 20
-train_cfg = dict(max_epochs=max_epochs, val_interval=max_epochs)
-# The tiny config's lr 2e-3 after a 50-iteration linear warm-up, decayed to
-# 0 by a cosine over the run: +2 mIoU over a constant rate at the same
-# budget on the benchmark world (issue 14's pilots).
-param_scheduler = [
-    dict(type='LinearLR', start_factor=0.1, by_epoch=False, begin=0,
-         end=50),
-    dict(type='CosineAnnealingLR', by_epoch=True, begin=0,
-         T_max=max_epochs, end=max_epochs, eta_min=0.0,
-         convert_to_iter_based=True),
-]
-default_hooks = dict(checkpoint=dict(interval=max_epochs))
+default_hooks = dict(checkpoint=dict(interval=_base_.max_epochs))

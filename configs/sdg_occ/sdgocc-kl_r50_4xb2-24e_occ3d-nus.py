@@ -1,7 +1,5 @@
-# SDG-KL (SDG-OCC, Duan et al., CVPR 2025) on Occ3D-nuScenes: SDG-Fusion's
-# network trained with the fusion as a teacher and FOAD distillation into
-# the camera BEV (kl_model of _base_/sdgocc-fusion_r50.py); inference skips
-# the SPVCNN branch and the fusion.
+# SDG-KL on Occ3D-nuScenes: SDG-Fusion's network with the fusion as teacher
+# (kl_model of _base_/sdgocc-fusion_r50.py); camera-only inference.
 _base_ = ['./sdgocc-fusion_r50_4xb2-24e_occ3d-nus.py']
 
 model = _base_.kl_model

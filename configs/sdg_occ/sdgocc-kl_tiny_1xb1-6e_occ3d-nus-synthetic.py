@@ -1,5 +1,8 @@
-# The tiny SDG-Fusion trained as SDG-KL: fusion teacher, FOAD distillation,
-# camera-only inference head path (kl_model of _base_/sdgocc-fusion_r50.py).
-_base_ = ['./sdgocc-fusion_tiny_1xb1-6e_occ3d-nus-synthetic.py']
+# The tiny SDG-Fusion trained as SDG-KL (kl_model of
+# _base_/sdgocc-fusion_r50.py): fusion teacher, FOAD distillation,
+# camera-only inference.
+_base_ = ['./_base_/sdgocc-fusion_tiny_occ3d-nus-synthetic.py',
+          '../_base_/cpu_smoke_runtime.py']
 
+default_hooks = dict(checkpoint=dict(interval=_base_.max_epochs))
 model = _base_.kl_model

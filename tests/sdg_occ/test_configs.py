@@ -48,14 +48,14 @@ COUPLED = {
     'depth_bound'
 }
 KL_KEYS = {
-    'variant', 'loss_distill.type', 'loss_distill.alpha',
+    'loss_distill.type', 'loss_distill.alpha',
     'loss_distill.beta', 'loss_distill.loss_weight', 'teacher_loss_weight',
     'separate_teacher_head'
 }
 #: Table 3's rows without the SDG lift also drop its semantic head.
 NO_SDG_KEYS = {'view_transform.use_sdg', 'depth_net.seg_channels', 'loss_seg'}
 #: Table 3's camera-only rows: no LiDAR encoder, no fusion.
-CAMERA_KEYS = {'variant', 'lidar_encoder', 'fusion'}
+CAMERA_KEYS = {'lidar_encoder', 'fusion'}
 DELTAS = {
     FUSION: (MODEL_BASE, COUPLED | {'loss_mask_key'}),
     # SurroundOcc: a LiDAR voxel that divides the 0.5 m cell and the SCAL
@@ -154,7 +154,8 @@ def test_coupled_values_come_from_the_dataset_base(path):
     assert coupled_value_mismatches(cfg, 'sdg_occ') == []
     model = cfg.model
     assert model.type == 'SDGOcc'
-    assert model.variant == ('kl' if 'sdgocc-kl' in path else 'fusion')
+    assert ('loss_distill' in model) is ('sdgocc-kl' in path)
+    assert 'variant' not in model  # the sub-modules say it
     assert model.loss_depth.loss_weight == 0.05
     # The fusion's widths come from the detector, by variant.
     assert not {'source_channels', 'cross_channels',
@@ -175,5 +176,5 @@ def test_ablation_knobs():
             assert model.view_transform.use_sdg is ('-lss' not in name)
             assert model.get('num_frames', 1) == (2 if '-2f_' in name else 1)
             camera = '-camera-' in name
-            assert (model.variant == 'camera') is camera
             assert (model.lidar_encoder is None) is camera
+            assert (model.fusion is None) is camera

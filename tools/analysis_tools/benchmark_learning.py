@@ -60,15 +60,13 @@ from projects.occ_common.evaluation import (largest_confusions,
 #: an SDG-Fusion config (the deltas of configs/sdg_occ/ablations/
 #: sdgocc-camera-lss_*).
 _CAMERA_LSS = [
-    'model.variant=camera', 'model.lidar_encoder=None', 'model.fusion=None',
+    'model.lidar_encoder=None', 'model.fusion=None',
     'model.view_transform.use_sdg=False', 'model.depth_net.seg_channels=0',
     'model.loss_seg=None'
 ]
 #: SDG-OCC Table 3's "+SDG" row (configs/sdg_occ/ablations/
 #: sdgocc-camera-sdg_*): the SDG lift without the LiDAR branch.
-_CAMERA_SDG = [
-    'model.variant=camera', 'model.lidar_encoder=None', 'model.fusion=None'
-]
+_CAMERA_SDG = ['model.lidar_encoder=None', 'model.fusion=None']
 #: Named runs: name -> (config, extra --cfg-options).
 RUNS = {
     'occcyl-tiny': ('configs/occ_cyl/'
@@ -378,7 +376,8 @@ def _train_clock_hook(max_seconds: Optional[float], path: str,
             meta = checkpoint.get('meta', {})
             self.seconds = float(meta.get('train_seconds', 0.0))
             self.cpu_seconds = float(meta.get('train_cpu_seconds', 0.0))
-            self.stopped_by_time = bool(meta.get('stopped_by_time', False))
+            # Not restored: a resumed run goes on, and says it stopped by
+            # time only if its own limit stops it again.
 
         def after_train(self, runner):
             self._write(runner)
@@ -452,7 +451,8 @@ def read_curves(work_dir: str) -> Dict[str, List]:
     """
     loss, val = {}, {}
     for path in sorted(
-            glob.glob(osp.join(work_dir, '*', 'vis_data', 'scalars.json'))):
+            glob.glob(osp.join(glob.escape(work_dir), '*', 'vis_data',
+                               'scalars.json'))):
         for record in read_json_lines(path):
             step = int(record['step'])
             if 'loss' in record:
@@ -673,7 +673,7 @@ def main(argv=None):
     # The table holds every finished run of OUT, also those of earlier
     # invocations (other budgets or options: see each run's settings).
     rows = [_load_json(path) for path in sorted(
-        glob.glob(osp.join(out, 'runs', '*', RESULT)))]
+        glob.glob(osp.join(glob.escape(out), 'runs', '*', RESULT)))]
     table = format_table(rows, [
         ('train CPU time (all threads)',
          lambda r: f'{r.get("train_cpu_s", math.nan) / 60:.1f} min'),

@@ -1,65 +1,22 @@
-# nuScenes + SurroundOcc occupancy labels (200x200x16, 0.5 m, LiDAR frame).
-# For the synthetic world use surroundocc-nus-synthetic.py (or override
-# data_root). The grid and classes below are the coupled values of every
-# model config on this dataset: they take them from occ_task.
-_base_ = ['./nus-occ-common.py']
+# nuScenes with SurroundOcc labels as one dataset config (for the data
+# tools and tests; the model configs assemble the same pieces themselves):
+# nus-occ-common.py around surroundocc-task.py's label step.
+_base_ = ['./nus-occ-common.py', './surroundocc-task.py']
 
-occ_format = 'surroundocc'
-# SurroundOcc's fixed grid (Wei et al., ICCV 2023): x, y in [-50, 50] m,
-# z in [-5, 3] m, 0.5 m voxels, in the LiDAR frame.
-point_cloud_range = [-50.0, -50.0, -5.0, 50.0, 50.0, 3.0]
-voxel_size = [0.5, 0.5, 0.5]
-grid_size = [
-    round((point_cloud_range[i + 3] - point_cloud_range[i]) / voxel_size[i])
-    for i in range(3)
-]  # [200, 200, 16]
-# 'empty' (label 0) then the 16 nuScenes-lidarseg classes (labels 1..16).
-class_names = [
-    'empty', 'barrier', 'bicycle', 'bus', 'car', 'construction_vehicle',
-    'motorcycle', 'pedestrian', 'traffic_cone', 'trailer', 'truck',
-    'driveable_surface', 'other_flat', 'sidewalk', 'terrain', 'manmade',
-    'vegetation'
-]
-num_classes = len(class_names)
-empty_index = class_names.index('empty')
-# What every model config on this dataset merges into its `model` (the task
-# arguments of the occupancy detectors): the grid, the classes and the
-# empty label. SurroundOcc has no visibility mask: every voxel is
-# supervised.
-occ_task = dict(
-    point_cloud_range=point_cloud_range,
-    voxel_size=voxel_size,
-    num_classes=num_classes,
-    empty_index=empty_index)
-
-_labels = [dict(type='LoadOccupancyGT', occ_format=occ_format)]
-_crop_and_pack = [
-    dict(type='PointsRangeFilter', point_cloud_range=point_cloud_range),
-    dict(type='PackOccInputs'),
-]
-train_pipeline = (
-    _base_.train_inputs + _labels + _base_.train_targets + _crop_and_pack)
-test_pipeline = (
-    _base_.test_inputs + _labels + _base_.test_targets + _crop_and_pack)
-# With the 2-D semantic targets (gt_seg_2d) of SDG-OCC.
-train_pipeline_seg2d = (
-    _base_.train_inputs_seg2d + _labels + _base_.train_targets_seg2d +
-    _crop_and_pack)
-test_pipeline_seg2d = (
-    _base_.test_inputs_seg2d + _labels + _base_.test_targets_seg2d +
-    _crop_and_pack)
-
-_dataset = dict(occ_format=occ_format, metainfo=dict(classes=class_names))
-train_dataloader = dict(dataset=dict(_dataset, pipeline=train_pipeline))
-val_dataloader = dict(dataset=dict(_dataset, pipeline=test_pipeline))
-test_dataloader = val_dataloader
-
-val_evaluator = dict(
-    convention=occ_format,
-    class_names=class_names,
-    use_camera_mask=False,  # SurroundOcc has no visibility mask.
-    # SDG-OCC Fig. 7 reports IoU by distance from the ego.
-    distance_ranges=[(0, 20), (20, 30), (30, 40), (40, 50)],
-    voxel_size=voxel_size,
-    point_cloud_range=point_cloud_range)
-test_evaluator = val_evaluator
+custom_imports = dict(imports=['projects.occ_common'],
+                      allow_failed_imports=False)
+# The plain pipelines (OccCylindrical's) and those with SDG-OCC's 2-D
+# semantic targets (gt_seg_2d).
+train_pipeline, test_pipeline, train_pipeline_seg2d, test_pipeline_seg2d = [
+    inputs + _base_._labels + targets + _base_._crop_and_pack
+    for inputs, targets in [(_base_.train_inputs, _base_.train_targets),
+                            (_base_.test_inputs, _base_.test_targets),
+                            (_base_.train_inputs_seg2d,
+                             _base_.train_targets_seg2d),
+                            (_base_.test_inputs_seg2d,
+                             _base_.test_targets_seg2d)]]
+train_dataloader = dict(
+    dataset=dict(_base_._occ_dataset, pipeline=train_pipeline))
+val_dataloader = test_dataloader = dict(
+    dataset=dict(_base_._occ_dataset, pipeline=test_pipeline))
+val_evaluator = test_evaluator = _base_._occ_metric

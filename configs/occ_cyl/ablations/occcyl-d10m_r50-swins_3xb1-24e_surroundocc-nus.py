@@ -6,6 +6,5 @@
 # range moved to [10, 60) and the depth loss supervising up to 60 m.
 _base_ = ['../occcyl_r50-swins_3xb1-24e_surroundocc-nus.py']
 
-# One key: DepthNet, the position embedding and the depth loss take their
-# bins from the detector's depth_bound.
+# One key: DepthNet, position embedding and depth loss take it from here.
 model = dict(depth_bound=[*_base_.model.depth_bound[:2], 10.0])

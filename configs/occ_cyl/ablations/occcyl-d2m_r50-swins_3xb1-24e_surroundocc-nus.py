@@ -2,6 +2,5 @@
 # 1 m): 25 bins at 1, 3, ..., 49 m, i.e. 6 x 25 x 58 x 100 pseudo points.
 _base_ = ['../occcyl_r50-swins_3xb1-24e_surroundocc-nus.py']
 
-# One key: DepthNet, the position embedding and the depth loss take their
-# bins from the detector's depth_bound.
+# One key: DepthNet, position embedding and depth loss take it from here.
 model = dict(depth_bound=[*_base_.model.depth_bound[:2], 2.0])

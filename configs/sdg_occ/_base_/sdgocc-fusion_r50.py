@@ -2,12 +2,11 @@
 # + FPN at 1/16 of the images, multi-task DepthNet, SDG view transform,
 # SPVCNN LiDAR BEV, neighbourhood-attention fusion with camera queries and
 # LiDAR keys / values, BEV encoder and FlashOcc's channel-to-height head;
-# AdamW 1e-4 with gradient clipping. A config adds a dataset base and sets
-# the coupled values on `model` from it (point_cloud_range, voxel_size,
-# num_classes, empty_index) and the depth bins that cover its grid: the
-# detector hands them to the modules that need them. `kl_model` turns it
-# into SDG-KL.
-_base_ = ['../../_base_/schedules/adamw-24e.py']
+# AdamW 1e-4 with gradient clipping. A config adds a label format and merges
+# its coupled values and depth bins (`depth_bounds`) into `model`;
+# `kl_model` turns it into SDG-KL.
+custom_imports = dict(imports=['projects.occ_common', 'projects.sdg_occ'],
+                      allow_failed_imports=False)
 
 _img_stride = 16  # image features at 1/16 (paper)
 # 2D semantic classes: the 16 lidarseg classes 1..16 as projected by
@@ -18,69 +17,44 @@ _point_dims = 5  # x, y, z, intensity, time lag of the merged sweeps
 # Channel widths (not fixed by the paper): BEVDet-Occ / FlashOcc's 64-channel
 # camera BEV, 256-channel image and head features; the SPVCNN encoder's
 # default 128-channel LiDAR BEV.
-_img_channels = 256
-_cam_channels = 64
-_lidar_channels = 128
-_bev_channels = 256
+_img_channels = _bev_channels = 256
+_cam_channels, _lidar_channels = 64, 128
 
 model = dict(
     type='SDGOcc',
-    variant='fusion',
+    # ImageNet statistics, matching the pretrained backbone.
     data_preprocessor=dict(
-        type='Det3DDataPreprocessor',
-        # ImageNet statistics, matching the pretrained backbone.
-        mean=[123.675, 116.28, 103.53],
-        std=[58.395, 57.12, 57.375],
-        bgr_to_rgb=True,
-        pad_size_divisor=32),
+        type='Det3DDataPreprocessor', mean=[123.675, 116.28, 103.53],
+        std=[58.395, 57.12, 57.375], bgr_to_rgb=True, pad_size_divisor=32),
     downsample=_img_stride,
     img_backbone=dict(
-        # mmdet.ResNet's weights and arguments; its with_cp recomputes each
-        # block in the backward with its training BatchNorms updated once
+        # mmdet.ResNet whose with_cp updates the training BatchNorms once
         # (mmdet's own with_cp updates them twice).
-        type='RecomputedResNet',
-        depth=50,
-        num_stages=4,
-        out_indices=(2, 3),
+        type='RecomputedResNet', depth=50, num_stages=4, out_indices=(2, 3),
         # Whole backbone trained with live BN statistics, as BEVDet-Occ.
-        frozen_stages=-1,
-        norm_cfg=dict(type='BN', requires_grad=True),
-        norm_eval=False,
-        style='pytorch',
-        # Recomputation here, in the DepthNet and in the LiDAR encoder
-        # (not in the paper, exact): one 6x256x704 training iteration
-        # with 10 sweeps peaks at 3.8 GB instead of 6.0 GB, for ~10 %
-        # more CPU time (tools/analysis_tools/benchmark.py --train
-        # --synthetic-batch).
-        with_cp=True,
-        init_cfg=None),  # weights: `pretrained` below
+        frozen_stages=-1, norm_cfg=dict(type='BN', requires_grad=True),
+        norm_eval=False, style='pytorch',
+        # Recomputation here, in the DepthNet and the LiDAR encoder (not in
+        # the paper, exact): a 6x256x704 iteration with 10 sweeps peaks at
+        # 3.8 GB instead of 6.0 GB for ~10 % more time
+        # (tools/analysis_tools/benchmark.py --train --synthetic-batch).
+        with_cp=True, init_cfg=None),  # weights: `pretrained` below
     # ImageNet weights, as BEVDet-Occ, loaded and checked without torchvision
-    # (docs/train_test.md, "Pretrained weights"); checkpoint=None trains from
-    # scratch.
-    pretrained=dict(
-        img_backbone=dict(
-            module='img_backbone',
-            checkpoint='torchvision://resnet50',
-            style='pytorch',
-            ignore=[r'^fc\.'])),  # the ImageNet classifier
+    # (docs/train_test.md); checkpoint=None trains from scratch.
+    pretrained=dict(img_backbone=dict(
+        module='img_backbone', checkpoint='torchvision://resnet50',
+        style='pytorch', ignore=[r'^fc\.'])),  # the ImageNet classifier
     # The FPN over the 1/16 and 1/32 stages, "down-sampled to 1/16"
     # (Sec. 3.3): mmdet's FPN without the 1/32 output convolution, which
     # nothing reads and whose unused weights DDP refuses.
-    img_neck=dict(
-        type='SelectiveFPN',
-        in_channels=[1024, 2048],
-        out_channels=_img_channels,
-        out_indices=(0, )),
+    img_neck=dict(type='SelectiveFPN', in_channels=[1024, 2048],
+                  out_channels=_img_channels, out_indices=(0, )),
     depth_net=dict(
-        type='DepthNet',
-        in_channels=_img_channels,
-        mid_channels=_img_channels,
-        context_channels=_cam_channels,
+        type='DepthNet', in_channels=_img_channels, mid_channels=_img_channels,
         # SDG-OCC's context is the plain texture branch (no eq. 5 terms).
-        with_depth_feature=False,
+        context_channels=_cam_channels, with_depth_feature=False,
         camera_param_dims=22,  # BEVDepth's camera-aware depth, as BEVDet
-        seg_channels=_num_seg_classes,
-        with_cp=True),
+        seg_channels=_num_seg_classes, with_cp=True),
     view_transform=dict(
         type='SDGViewTransform',
         # Semantic diffusion radius in 1/16 feature pixels (not fixed by the
@@ -88,119 +62,101 @@ model = dict(
         diffusion_radius=2.0,
         # Bidirectional linear incremental discretization: r = 1 m, l = 8
         # (paper, Table 4): 2 l + 1 = 17 virtual points 0.125 m apart.
-        layer_radius=1.0,
-        num_layers=8,
-        fallback='lss',
-        use_sdg=True),
+        layer_radius=1.0, num_layers=8, fallback='lss', use_sdg=True),
     lidar_encoder=dict(
-        type='SPVCNNEncoder',
-        in_channels=_point_dims,
+        type='SPVCNNEncoder', in_channels=_point_dims,
         # SDG-OCC's 0.1 m voxels; two stride-2 stages reach Occ3D's 0.4 m
         # BEV cell.
-        voxel_size=[0.1, 0.1, 0.1],
-        stage_strides=(2, 2),
-        out_channels=_lidar_channels,
+        voxel_size=[0.1, 0.1, 0.1], stage_strides=(2, 2),
+        out_channels=_lidar_channels, with_cp=True,
         # "Voxelization and normalization" (Sec. 3.5): each point's offsets
         # to its voxel's mean and centre, as in the authors' code.
-        point_offsets=True,
-        with_cp=True),
+        point_offsets=True),
     fusion=dict(
         type='NeighborhoodFusion',
         # The widths come from the detector: camera BEV queries, LiDAR BEV
         # keys / values for SDG-Fusion (swapped for SDG-KL's teacher).
         # Attention width (not given by the paper): the camera BEV's 64
         # channels in 4 heads of 16, NAT's head width.
-        embed_dims=64,
-        num_heads=4,
-        # Neighbourhood size of the fusion attention: k = 7 (paper,
-        # Table 5).
-        kernel_size=7),
+        embed_dims=64, num_heads=4,
+        kernel_size=7),  # neighbourhood k = 7 (paper, Table 5)
     bev_encoder=dict(
-        type='SDGBEVEncoder',
-        in_channels=_cam_channels,
+        type='SDGBEVEncoder', in_channels=_cam_channels,
         # BEVDet's CustomResNet widths (2x, 4x, 8x the camera BEV).
-        stage_channels=[
-            _cam_channels * 2, _cam_channels * 4, _cam_channels * 8
-        ],
+        stage_channels=[_cam_channels * 2, _cam_channels * 4,
+                        _cam_channels * 8],
         num_blocks=[2, 2, 2],  # BEVDet's two residual blocks per stage
         out_channels=_bev_channels),
     occ_head=dict(
-        type='ChannelToHeightHead',
-        in_channels=_bev_channels,
+        type='ChannelToHeightHead', in_channels=_bev_channels,
         mid_channels=_bev_channels,
         num_convs=1,  # FlashOcc's single 3x3 conv before the predictor
         # FlashOcc's masked cross-entropy on Occ3D (focal with gamma = 0);
         # add OccLovaszLoss / SceneClassAffinityLoss entries to use them.
-        loss_occ=dict(
-            type='OccupancyLoss',
-            losses=[dict(type='OccFocalLoss', gamma=0.0, loss_weight=1.0)])),
-    loss_depth=dict(
-        type='DepthBCELoss', downsample=_img_stride,
-        # The paper gives no weight; 0.05 is the authors' partial release's
-        # (BEVDet-Occ's), not a value of the paper.
-        loss_weight=0.05),
-    loss_seg=dict(
-        type='mmdet.CrossEntropyLoss',
-        ignore_index=255,
-        avg_non_ignore=True,
-        # The paper gives no weight; 0.5 is the authors' release's.
-        loss_weight=0.5))
+        loss_occ=dict(type='OccupancyLoss', losses=[
+            dict(type='OccFocalLoss', gamma=0.0, loss_weight=1.0)])),
+    # The paper gives neither loss weight; 0.05 (depth) is the authors'
+    # partial release's (BEVDet-Occ's), 0.5 (2D semantics) the release's.
+    loss_depth=dict(type='DepthBCELoss', downsample=_img_stride,
+                    loss_weight=0.05),
+    loss_seg=dict(type='mmdet.CrossEntropyLoss', ignore_index=255,
+                  avg_non_ignore=True, loss_weight=0.5))
+
+# Depth bins per label grid (min, max, step in metres; not given by the
+# paper), which the dataset configs merge into `model`: on Occ3D those of
+# BEVDet-Occ / FlashOcc, which SDG-OCC builds on, 1..45 m at 0.5 m (88
+# bins); on SurroundOcc BEVDet's nuScenes 1..60 m at 0.5 m (118 bins),
+# which covers the 50 m grid along every camera axis.
+depth_bounds = dict(occ3d=[1.0, 45.0, 0.5], surroundocc=[1.0, 60.0, 0.5])
 
 # SDG-KL: SDG-Fusion's network trained with a LiDAR-dominant fusion (LiDAR
-# queries, camera keys / values; the detector swaps the widths) as a
-# teacher and FOAD distillation into the camera BEV; inference skips the
-# SPVCNN branch and the fusion. The *sdgocc-kl_* configs merge it into
+# queries, camera keys / values; the detector swaps the widths) as a teacher
+# and FOAD distillation into the camera BEV; inference skips the SPVCNN branch
+# and the fusion. The distillation loss makes the model SDG-KL (SDGOcc reads
+# its variant off its sub-modules). The *sdgocc-kl_* configs merge it into
 # `model`.
 kl_model = dict(
-    variant='kl',
     # alpha, beta and the loss weight are not fixed by the paper: the
     # N_AR / N_IR balance already equalises the two regions, so both
     # regions start at weight 1.
-    loss_distill=dict(
-        type='FOADDistillLoss', alpha=1.0, beta=1.0, loss_weight=1.0),
+    loss_distill=dict(type='FOADDistillLoss', alpha=1.0, beta=1.0,
+                      loss_weight=1.0),
     # The teacher must learn occupancy for its features to be worth
     # distilling; it gets the same weight as the student's head.
     teacher_loss_weight=1.0,
-    # The teacher decodes with its own BEV encoder and head (training
-    # only; inference runs the student's). The paper does not say whether
-    # the two share them. Shared, the small configs' student plateaued at
-    # 10.4 mIoU by 800 iterations, below the camera-only LSS row (13.5)
-    # and the +SDG camera row without any teacher (20.5 at 1280); with its
-    # own head the same student reached 14.0 at 800 (issue 14's held-out
-    # benchmark). Keeping the teacher's loss out of the camera branch
-    # instead (detach_teacher_camera) did not help.
+    # The teacher decodes with its own BEV encoder and head (training only;
+    # the paper does not say whether the two share them): shared, the small
+    # configs' student plateaued at 10.4 mIoU by 800 iterations, below the
+    # camera-only LSS row (13.5); with its own head it reached 14.0 at 800
+    # (learning benchmark). Keeping the teacher's loss out of the camera
+    # branch instead (detach_teacher_camera) did not help.
     separate_teacher_head=True)
-# SDG-OCC Table 3's camera rows (ablations/sdgocc-camera-*, single and
-# two-frame): no LiDAR encoder, no fusion. "+SDG" keeps the SDG lift (the
-# LiDAR points still guide it); the Baseline is the plain LSS lift, and
-# without SDG nothing uses the 2D semantics, so its DepthNet has no
-# semantic head and no loss_seg (FlashOcc has none); its depth supervision
-# stays (FlashOcc's BEVDepth-style DepthNet has it).
-camera_sdg_model = dict(variant='camera', lidar_encoder=None, fusion=None)
+# SDG-OCC Table 3's camera rows (ablations/sdgocc-camera-*): no LiDAR
+# encoder, no fusion. "+SDG" keeps the SDG lift (LiDAR points still guide
+# it); the Baseline is the plain LSS lift, without which nothing uses the
+# 2D semantics, so no semantic head or loss_seg (FlashOcc has none); depth
+# supervision stays (FlashOcc's BEVDepth-style DepthNet has it).
+camera_sdg_model = dict(lidar_encoder=None, fusion=None)
 camera_lss_model = dict(
-    camera_sdg_model,
-    view_transform=dict(use_sdg=False),
-    depth_net=dict(seg_channels=0),
-    loss_seg=None)
+    camera_sdg_model, view_transform=dict(use_sdg=False),
+    depth_net=dict(seg_channels=0), loss_seg=None)
 
-# Schedule: AdamW lr 1e-4 with gradient clipping (paper). The weight decay,
-# clip norm, warm-up and 24 epochs follow BEVDet-Occ / FlashOcc (not given
-# in the paper); 4 GPUs x 2 samples is an assumption, hence auto_scale_lr.
-# Choices that differ from the authors' partial release, kept because no
-# config has been trained on nuScenes to compare them (issue 47): 24
-# epochs (release: 48 for ResNet-50, 36 with 4D stereo), clip norm 5
-# (release: 2), no EMA of the weights (the release keeps one; add mmdet's
-# EMAHook to custom_hooks for it), the key frame plus 10 sweeps (release:
-# the key frame only; configs/_base_/datasets/nus-occ-common.py), and the
-# learning rate of one RTX 4090 (paper) for 4 x 2 samples with
-# auto_scale_lr off unless tools/train.py --auto-scale-lr (mmdet3d's
-# convention).
+# Schedule: AdamW lr 1e-4 with gradient clipping (paper); weight decay, clip
+# norm, warm-up and 24 epochs follow BEVDet-Occ / FlashOcc; 4 GPUs x 2 samples
+# is an assumption, hence auto_scale_lr (off unless tools/train.py
+# --auto-scale-lr, mmdet3d's convention; the paper's rate is one RTX 4090's).
+# Differences from the authors' partial release, kept as no config had been
+# trained on nuScenes to compare them (commit 41311d5): 24 epochs (release: 48,
+# 36 with 4D stereo), clip norm 5 (release: 2), no EMA (add mmdet's EMAHook to
+# custom_hooks), the key frame plus 10 sweeps (release: the key frame only).
+max_epochs = 24
+train_cfg = dict(type='EpochBasedTrainLoop', max_epochs=max_epochs,
+                 val_interval=max_epochs)
+val_cfg, test_cfg = dict(type='ValLoop'), dict(type='TestLoop')
 optim_wrapper = dict(
-    optimizer=dict(lr=1e-4, weight_decay=1e-2),
+    type='OptimWrapper',
+    optimizer=dict(type='AdamW', lr=1e-4, weight_decay=1e-2),
     clip_grad=dict(max_norm=5, norm_type=2))
-param_scheduler = [
-    dict(
-        type='LinearLR', start_factor=1e-3, by_epoch=False, begin=0,
-        end=200),
-]
+param_scheduler = [dict(type='LinearLR', start_factor=1e-3, by_epoch=False,
+                        begin=0, end=200)]
 auto_scale_lr = dict(enable=False, base_batch_size=8)
