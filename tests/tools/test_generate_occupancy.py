@@ -61,13 +61,17 @@ def test_generated_labels_load_through_the_dataset(converted_tiny_world,
             assert (sample['gt_occ'] == 17).sum() > 0.5 * 200 * 200 * 16
 
 
-def test_benchmark_ranks_the_variants(converted_tiny_world, tmp_path):
+def test_benchmark_ranks_the_variants(converted_tiny_world, generated,
+                                      tmp_path):
     """On the tiny world (2 key frames, 80 azimuth steps): the generated
     mask_lidar is the exact one (the same rays, recovered with the ones
     that returned nothing, walked by the same voxel walk); accumulating
     beats the key frame alone in the exact LiDAR mask (box frames against
-    the world frame: the hand-built car in test_hand_built_scenes.py)."""
+    the world frame: the hand-built car in test_hand_built_scenes.py).
+    ``ours`` is the command line's labels (the defaults), which the
+    benchmark resumes instead of making them again."""
     tool = load_tool('tools/analysis_tools/benchmark_generated_labels.py')
+    os.symlink(generated, tmp_path / 'ours')
     results = tool.main(['--root-path', converted_tiny_world, '--out',
                          str(tmp_path), '--variants', 'keyframe', 'ours'])
     ours, lidar = results['ours'], 'lidar_mask'
@@ -186,3 +190,21 @@ def test_workers_write_what_one_process_writes(tmp_path):
                                      str(tmp_path / 'two'))
                 with open(mine, 'rb') as a, open(other, 'rb') as b:
                     assert a.read() == b.read(), name
+
+
+def test_command_line_baselines_are_the_benchmarks():
+    """``--key-frame-only`` / ``--no-box-frame`` make the labels the
+    quality benchmark scores as its baselines: the key frame alone also
+    without carving and densification (with densification it would be a
+    different, better baseline than the one reported)."""
+    tool = load_tool('tools/dataset_converters/generate_occupancy.py')
+    bench = load_tool('tools/analysis_tools/benchmark_generated_labels.py')
+    base = ['--root-path', 'r', '--out-dir', 'o']
+    for flag, variant in (('--key-frame-only', 'keyframe'),
+                          ('--no-box-frame', 'no-box-frame')):
+        cfg = tool.label_config(tool.parse_args(base + [flag]))
+        assert cfg == LabelConfig(**bench.VARIANTS[variant][1])
+    cfg = tool.label_config(tool.parse_args(base + ['--key-frame-only']))
+    assert (cfg.accumulate, cfg.fill_objects, cfg.ground_fill_radius,
+            cfg.min_hit_ratio) == (False, False, 0.0, 0.0)
+    assert tool.label_config(tool.parse_args(base)) == LabelConfig()

@@ -36,7 +36,8 @@ import time
 
 from projects.occ_common.analysis.tool_runs import pct
 from projects.occ_common.datasets.nuscenes_classes import OCC3D_CLASS_NAMES
-from projects.occ_common.datasets.occupancy_labels import (LabelConfig,
+from projects.occ_common.datasets.occupancy_labels import (BASELINES,
+                                                           LabelConfig,
                                                            generate_occupancy)
 from projects.occ_common.datasets.occupancy_labels.generate import PROGRESS_DIR
 from projects.occ_common.datasets.occupancy_labels.writers import (
@@ -45,10 +46,8 @@ from projects.occ_common.evaluation.label_quality import LabelQuality
 
 #: Variant name -> (column title, LabelConfig changes).
 VARIANTS = {
-    'keyframe': ('key frame alone', dict(
-        accumulate=False, min_hit_ratio=0.0, ground_fill_radius=0.0,
-        fill_objects=False)),
-    'no-box-frame': ('accumulated, no box frames', dict(box_frame=False)),
+    'keyframe': ('key frame alone', BASELINES['key-frame']),
+    'no-box-frame': ('accumulated, no box frames', BASELINES['no-box-frame']),
     'no-densify': ('ours, no densification', dict(
         ground_fill_radius=0.0, fill_objects=False)),
     'ours': ('ours (defaults)', dict()),

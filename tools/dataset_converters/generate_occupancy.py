@@ -45,8 +45,9 @@ def parse_args(argv=None):
         'settings (defaults: LabelConfig in '
         'projects/occ_common/datasets/occupancy_labels/config.py)')
     group.add_argument('--key-frame-only', action='store_true',
-                       help='voxelise each key frame\'s own sweep only '
-                       '(a baseline: no accumulation)')
+                       help='voxelise each key frame\'s own sweep as it '
+                       'is, without carving or densification (a baseline, '
+                       'as the quality benchmark makes it)')
     group.add_argument('--no-box-frame', action='store_true',
                        help='accumulate objects in the world frame like '
                        'the static scene (a baseline: moving objects '
@@ -68,10 +69,15 @@ def parse_args(argv=None):
 
 def label_config(args):
     """The ``LabelConfig`` the options ask for."""
-    from projects.occ_common.datasets.occupancy_labels import LabelConfig
-    changes = dict(accumulate=not args.key_frame_only,
-                   box_frame=not args.no_box_frame,
-                   fill_objects=not args.no_fill_objects)
+    from projects.occ_common.datasets.occupancy_labels import (BASELINES,
+                                                               LabelConfig)
+    changes = {}
+    for flag, name in (('key_frame_only', 'key-frame'),
+                       ('no_box_frame', 'no-box-frame')):
+        if getattr(args, flag):
+            changes.update(BASELINES[name])
+    if args.no_fill_objects:
+        changes['fill_objects'] = False
     for key in ('surface_depth', 'ground_fill_radius', 'mask_sweeps'):
         if getattr(args, key) is not None:
             changes[key] = getattr(args, key)

@@ -20,12 +20,12 @@ new rig). Each module holds one step, in the order they run:
 Entry point: ``tools/dataset_converters/generate_occupancy.py``. Needs
 nuscenes-devkit and scipy; imports no model code.
 """
-from .config import LabelConfig
+from .config import BASELINES, LabelConfig
 from .generate import generate_occupancy
 from .scene_labels import FrameLabels, scene_labels, write_scene
 from .sequence import SceneSequence, read_scene
 
 __all__ = [
-    'FrameLabels', 'LabelConfig', 'SceneSequence', 'generate_occupancy',
-    'read_scene', 'scene_labels', 'write_scene'
+    'BASELINES', 'FrameLabels', 'LabelConfig', 'SceneSequence',
+    'generate_occupancy', 'read_scene', 'scene_labels', 'write_scene'
 ]

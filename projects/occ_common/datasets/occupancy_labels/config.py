@@ -1,7 +1,7 @@
 """The settings of the occupancy label generator, with their reasons."""
 import json
 from dataclasses import dataclass, fields
-from typing import Tuple
+from typing import Dict, Tuple
 
 
 @dataclass(frozen=True)
@@ -101,3 +101,17 @@ class LabelConfig:
         compared with them as read back: tuples become lists)."""
         return json.loads(json.dumps(
             {f.name: getattr(self, f.name) for f in fields(self)}))
+
+
+#: The two baselines the generated labels are measured against
+#: (``tools/analysis_tools/benchmark_generated_labels.py``), as changes to
+#: the defaults; ``generate_occupancy.py --key-frame-only / --no-box-frame``
+#: make the same. ``key-frame``: each key frame's own sweep voxelised as it
+#: is, without carving (its own rays would carve its own returns) or
+#: densification. ``no-box-frame``: everything accumulated in the world
+#: frame (moving objects smear), the other steps as the defaults.
+BASELINES: Dict[str, dict] = {
+    'key-frame': dict(accumulate=False, min_hit_ratio=0.0,
+                      ground_fill_radius=0.0, fill_objects=False),
+    'no-box-frame': dict(box_frame=False),
+}
