@@ -26,6 +26,12 @@ On a synthetic world (``tools/dataset_converters/
 create_synthetic_nuscenes.py``) the root's labels are exact; on real
 nuScenes they are Occ3D's / SurroundOcc's. Writes ``OUT/quality.md`` and
 ``OUT/quality.json``.
+
+``--reach`` adds what bounds any label made from these sweeps: per class,
+the share of the reference's occupied Occ3D voxels that some ray of the
+scene reaches (crosses or ends in; every sweep's returns and no-return
+rays). The rest (building interiors, the far side of things) only
+densification can label.
 """
 import argparse
 import glob
@@ -34,12 +40,21 @@ import os
 import os.path as osp
 import time
 
+import numpy as np
+
 from projects.occ_common.analysis.tool_runs import pct
-from projects.occ_common.datasets.nuscenes_classes import OCC3D_CLASS_NAMES
+from projects.occ_common.datasets.nuscenes_classes import (OCC3D_CLASS_NAMES,
+                                                           OCC3D_FREE_LABEL)
 from projects.occ_common.datasets.occupancy_labels import (BASELINES,
                                                            LabelConfig,
-                                                           generate_occupancy)
+                                                           generate_occupancy,
+                                                           read_scene)
+from projects.occ_common.datasets.occupancy_labels.accumulation import \
+    accumulate_scene
 from projects.occ_common.datasets.occupancy_labels.generate import PROGRESS_DIR
+from projects.occ_common.datasets.occupancy_labels.visibility import lidar_mask
+from projects.occ_common.datasets.occupancy_labels.voxelization import \
+    format_grid
 from projects.occ_common.datasets.occupancy_labels.writers import (
     OCC3D_DIR, SURROUNDOCC_DIR)
 from projects.occ_common.evaluation.label_quality import LabelQuality
@@ -69,7 +84,45 @@ def parse_args(argv=None):
                         help='only these scenes (default: all)')
     parser.add_argument('--workers', type=int, default=0,
                         help='processes, one scene each (0: this one)')
+    parser.add_argument('--reach', action='store_true',
+                        help='also measure the share of the reference\'s '
+                        'occupied voxels some ray of the scene reaches')
     return parser.parse_args(argv)
+
+
+def reach(root: str, version: str, scenes=None) -> dict:
+    """Per Occ3D label, the reference's occupied voxels of every key frame
+    and those some ray of the scene reaches (crosses or ends in).
+
+    Moving objects' counts mean little: rays of other sweeps cross where
+    they were.
+
+    Returns:
+        dict: ``occupied`` and ``reached`` (lists over
+        ``OCC3D_CLASS_NAMES``), ``share_reached`` (all labels, %).
+    """
+    from nuscenes import NuScenes
+    cfg = LabelConfig()
+    grid = format_grid('occ3d')
+    num = len(OCC3D_CLASS_NAMES)
+    occupied, reached = np.zeros(num, np.int64), np.zeros(num, np.int64)
+    nusc = NuScenes(version, root, verbose=False)
+    for scene in nusc.scene:
+        if scenes and scene['name'] not in scenes:
+            continue
+        sequence = read_scene(nusc, scene, root)
+        rays = accumulate_scene(sequence, cfg).rays
+        for frame in sequence.key_frames:
+            seen = lidar_mask(grid, np.linalg.inv(frame.ego2global), rays,
+                              cfg.no_return_range)
+            with np.load(osp.join(root, OCC3D_DIR, sequence.name,
+                                  frame.token, 'labels.npz')) as f:
+                semantics = f['semantics']
+            solid = semantics != OCC3D_FREE_LABEL
+            occupied += np.bincount(semantics[solid], minlength=num)
+            reached += np.bincount(semantics[solid & seen], minlength=num)
+    return dict(occupied=occupied.tolist(), reached=reached.tolist(),
+                share_reached=100 * reached.sum() / max(occupied.sum(), 1))
 
 
 def score(root: str, labels_dir: str, scenes=None) -> dict:
@@ -164,6 +217,14 @@ def main(argv=None):
     header = (f'Generated labels against the labels of {args.root_path} '
               f'({results[args.variants[0]]["samples"]["occ3d"]} key '
               'frames); IoU in %.\n\n')
+    if args.reach:
+        reached = reach(args.root_path, args.version, args.scenes)
+        results['reach'] = reached
+        text += ('\n\nReference occupied voxels some ray of the scene '
+                 f'reaches: {reached["share_reached"]:.1f} %; per class: '
+                 + ', '.join(f'{name} {pct(100 * r / o)}' for name, o, r in
+                             zip(OCC3D_CLASS_NAMES, reached['occupied'],
+                                 reached['reached']) if o))
     with open(osp.join(args.out, 'quality.md'), 'w') as f:
         f.write(header + text + '\n')
     with open(osp.join(args.out, 'quality.json'), 'w') as f:
