@@ -1,5 +1,6 @@
 """Data transforms of the occupancy plugins (registered in TRANSFORMS)."""
 from .bev_aug import OccBEVAug
+from .corruptions import OccCorruption
 from .depth_maps import PointsToDepthMaps, PointsToSemanticMaps
 from .ego_points import RemoveEgoPoints
 from .formatting import PackOccInputs
@@ -16,5 +17,6 @@ __all__ = [
     'LoadMultiViewImagesOcc', 'LoadOccupancyGT', 'LoadLidarSegLabels',
     'MultiViewImageAug', 'MultiViewPhotoMetric', 'PointsToDepthMaps',
     'PointsToSemanticMaps', 'OccBEVAug', 'PointsToEgoFrame',
-    'PackOccInputs', 'RemoveEgoPoints', 'LoadPreviousKeyFrames'
+    'PackOccInputs', 'RemoveEgoPoints', 'LoadPreviousKeyFrames',
+    'OccCorruption'
 ]

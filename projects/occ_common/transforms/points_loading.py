@@ -251,6 +251,12 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
         check_ring (bool): Refuse a ``load_dim=5`` sweep whose fifth
             values are not ring indices (another dtype or point width).
             Defaults to True.
+        record_ring (bool): Keep every merged point's ring (beam) index,
+            which the time lag replaces in ``points``, as
+            ``points_ring``, for a transform right after this one that
+            needs it (``OccCorruption``'s beam reduction, which removes
+            it again: later filters would not keep it aligned). Defaults
+            to False.
         **kwargs: ``backend_args``, ``pad_empty_sweeps``, ``remove_close``,
             ``test_mode`` of the parent.
 
@@ -273,6 +279,8 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
 
     - points_time_dim (int | None): Column of the time lag in ``points``
       (None if ``use_dim`` drops it).
+    - points_ring (np.ndarray): Shape (P_key + P_sweeps,), int16, the ring
+      index of every point; only with ``record_ring``.
     """
 
     def __init__(self,
@@ -282,6 +290,7 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
                  ignore_index: int = 255,
                  ego_box: Optional[Sequence[float]] = None,
                  check_ring: bool = True,
+                 record_ring: bool = False,
                  **kwargs) -> None:
         super().__init__(
             sweeps_num=sweeps_num,
@@ -291,6 +300,7 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
         self.ignore_index = ignore_index
         self.ego_box = None if ego_box is None else check_ego_box(ego_box)
         self.check_ring = check_ring
+        self.record_ring = record_ring
 
     @staticmethod
     def sweep_to_key(sweep: dict) -> np.ndarray:
@@ -337,14 +347,18 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
                 f'{self.__class__.__name__} needs key-frame points with at '
                 f'least 5 columns (column 4 becomes the time lag), got '
                 f'{points.tensor.shape[1]} for {results.get("lidar_path")}')
+        key_ring = points.tensor[:, RING_COLUMN].numpy().copy()
         points.tensor[:, 4] = 0
         key = points.tensor.numpy()
-        parts = [key]
+        parts, rings = [key], [key_ring]
         sweeps = results.get('lidar_sweeps')
         if sweeps is None:
             if self.pad_empty_sweeps:
-                pad = self._remove_close(key) if self.remove_close else key
-                parts += [pad] * self.sweeps_num
+                pad = np.column_stack([key, key_ring])
+                if self.remove_close:
+                    pad = self._remove_close(pad)
+                parts += [pad[:, :-1]] * self.sweeps_num
+                rings += [pad[:, -1]] * self.sweeps_num
         else:
             token = results.get('token', '?')
             key_time = _seconds(results['timestamp'],
@@ -370,6 +384,7 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
                         self.ego_box)
                 mat = self.sweep_to_key(sweep).astype(np.float32)
                 arr[:, :3] = arr[:, :3] @ mat[:3, :3].T + mat[:3, 3]
+                rings.append(arr[:, RING_COLUMN].copy())
                 arr[:, 4] = key_time - sweep_time
                 parts.append(arr)
         num_key = len(points)
@@ -377,6 +392,8 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
         # Tells later transforms which column separates key frame / sweeps.
         results['points_time_dim'] = self.use_dim.index(4) \
             if 4 in self.use_dim else None
+        if self.record_ring:
+            results['points_ring'] = np.concatenate(rings).astype(np.int16)
         if 'pts_semantic_mask' in results:
             key_mask = np.asarray(results['pts_semantic_mask'])
             pad = np.full(len(results['points']) - num_key, self.ignore_index,
@@ -389,4 +406,5 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
         return (f'{self.__class__.__name__}(sweeps_num={self.sweeps_num}, '
                 f'load_dim={self.load_dim}, use_dim={self.use_dim}, '
                 f'remove_close={self.remove_close}, '
-                f'ego_box={self.ego_box}, test_mode={self.test_mode})')
+                f'ego_box={self.ego_box}, test_mode={self.test_mode}, '
+                f'record_ring={self.record_ring})')

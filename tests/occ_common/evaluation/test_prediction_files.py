@@ -46,5 +46,6 @@ def test_bad_files_name_themselves(tmp_path):
         read_prediction(str(tmp_path / 'rows.npy'), (4, 3, 2), 0)
     with pytest.raises(ValueError, match="has no 'token'"):
         prediction_path(str(tmp_path), 'occ3d', dict(sample_idx=1))
-    with pytest.raises(ValueError, match=r"sample token '\.\./x' cannot name a file"):
+    with pytest.raises(ValueError,
+                       match=r"sample token '\.\./x' cannot name a file"):
         prediction_path(str(tmp_path), 'occ3d', dict(token='../x'))
