@@ -129,3 +129,39 @@ def _test_and_check(path, checkpoint, data, work_dir):
         assert metrics['occ/RayIoU'] == pytest.approx(sum(at) / 3, abs=1e-3)
         assert 0.0 <= min(at) and max(at) <= 100.0
     return metrics
+
+
+@pytest.mark.slow
+def test_compile_true_trains_and_tests_through_the_runner(
+        synthetic_root, tmp_path):
+    """``compile`` in the config (here ``dict(backend='eager')``: Dynamo
+    without inductor, to keep it to a minute) through tools/train.py
+    (mmengine compiles train_step) and tools/test.py (TorchCompileHook
+    compiles test_step): SDG-KL trains one epoch, and the compiled test of
+    its checkpoint reports the eager test's IoU and mIoU (equal to 1e-6;
+    the compiled code takes the GPU's code path, the same values by the
+    tests of each change)."""
+    path = next(p for p in TRAINED if 'sdgocc-kl' in p)
+    data = data_options(synthetic_root, path)
+    compiled = ['compile.backend=eager']
+    work_dir = str(tmp_path / 'work')
+    proc = run_tool('tools/train.py', path, '--work-dir', work_dir,
+                    '--cfg-options', 'train_cfg.max_epochs=1',
+                    'train_cfg.val_interval=1',
+                    'default_hooks.checkpoint.interval=1', *data, *compiled)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert len(train_losses(work_dir)) == 2
+    checkpoint = osp.join(work_dir, 'epoch_1.pth')
+    results = []
+    for extra in ([], compiled):
+        test_dir = str(tmp_path / f'test{len(extra)}')
+        proc = run_tool('tools/test.py', path, checkpoint, '--work-dir',
+                        test_dir, '--cfg-options', *data, *extra)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        results.append(last_test_metrics(test_dir))
+    eager, fast = results
+    logs = glob.glob(osp.join(str(tmp_path), 'test1', '*', '*.log'))
+    assert any('TorchCompileHook: test_step compiled' in open(f).read()
+               for f in logs)
+    for key in ('occ/IoU', 'occ/mIoU'):
+        assert fast[key] == pytest.approx(eager[key], abs=1e-6)

@@ -30,7 +30,11 @@ custom_hooks = [
     # state saved in each checkpoint: a resumed run repeats an uninterrupted
     # one exactly (DropPath and dropout included).
     dict(type='AugmentationSeedHook'),
-    dict(type='RandomStateHook')]
+    dict(type='RandomStateHook'),
+    # With `compile=True` (mmengine compiles train_step): val/test steps
+    # compiled too, and every cloud's point count marked dynamic, so a new
+    # count recompiles nothing. Without `compile` it does nothing.
+    dict(type='TorchCompileHook')]
 
 # Where the Runner's pictures and scalars go (also mmdet3d's
 # tools/misc/browse_dataset.py); for TensorBoard add

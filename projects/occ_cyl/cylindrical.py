@@ -232,6 +232,42 @@ class CylinderGrid:
         return voxels[:-1], torch.where(flat < 0, torch.full_like(rows, -1),
                                         rows)
 
+    def occupied_padded(self, flat: Tensor
+                        ) -> Tuple[Tensor, Tensor, Tensor]:
+        """:meth:`occupied` in a list as long as the points: no size that
+        depends on the data.
+
+        ``torch.unique`` returns as many voxels as are occupied, a size the
+        host must read (a graph break under ``torch.compile``, and no CUDA
+        graph can hold it). Here the voxels fill the first rows of a list
+        of one row per point, in the same (sorted) order, and the rows
+        after them are padding: a sort, a cumulative sum and two scatters.
+
+        Args:
+            flat (Tensor): From :meth:`flat_index`, -1 outside.
+                Shape (...).
+
+        Returns:
+            tuple[Tensor, Tensor, Tensor]: The flat indices, Shape (P,)
+            with P = ``flat.numel()``: those of :meth:`occupied` first,
+            then padding (meaningless values); each point's row, -1 for
+            points outside, the shape of ``flat``: equal to
+            :meth:`occupied`'s; and which rows hold a voxel, bool,
+            Shape (P,).
+        """
+        past = torch.iinfo(torch.long).max
+        keys = torch.where(flat < 0, torch.full_like(flat, past),
+                           flat).reshape(-1)
+        ordered, order = torch.sort(keys)
+        first = torch.ones_like(ordered, dtype=torch.bool)
+        first[1:] = ordered[1:] != ordered[:-1]
+        run = first.cumsum(0) - 1
+        rows = torch.empty_like(run).scatter_(0, order, run).view_as(flat)
+        # Every point of a run writes the same key into its row.
+        voxels = torch.full_like(keys, past).scatter_(0, run, ordered)
+        return (voxels, torch.where(flat < 0, torch.full_like(rows, -1),
+                                    rows), voxels != past)
+
     def unravel(self, flat: Tensor) -> Tensor:
         """``(b, i, j, k)`` of flat indices ``((b * R + i) * Theta + j) * Z
         + k``.

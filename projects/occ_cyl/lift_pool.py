@@ -25,7 +25,6 @@ gradient. Forward values of the two paths are bitwise equal; gradients are
 equal up to the order of floating-point summation (bitwise when the
 arithmetic is exact).
 """
-import warnings
 from typing import Iterator, Tuple
 
 import torch
@@ -34,7 +33,9 @@ from torch.autograd import Function
 from torch.autograd.function import once_differentiable
 
 from projects.occ_common.models.layers import cell_max
-from projects.occ_common.utils.device_path import check_index_range
+from projects.occ_common.models.layers.cell_max import quiet_index_reduce
+from projects.occ_common.utils.device_path import (accelerator_path,
+                                                   check_index_range)
 
 
 def _check_voxel_index(voxel_idx: Tensor, num_voxels: int) -> None:
@@ -92,6 +93,18 @@ def _winners(feats: Tensor, voxel_idx: Tensor, point_ids: Tensor,
              num_voxels: int, sentinel: int) -> Tensor:
     """Lowest-index argmax per voxel and channel, ``sentinel`` if empty."""
     channels = feats.shape[1]
+    if accelerator_path(feats):
+        # Points outside go to a spare row V instead of being selected:
+        # no size that the host must read.
+        idx = torch.where(voxel_idx >= 0, voxel_idx,
+                          num_voxels)[:, None].expand(-1, channels)
+        vmax = feats.new_full((num_voxels + 1, channels), float('-inf'))
+        vmax.scatter_reduce_(0, idx, feats, 'amax')
+        cand = torch.where(feats == vmax.gather(0, idx), point_ids[:, None],
+                           sentinel)
+        winner = torch.full((num_voxels + 1, channels), sentinel,
+                            dtype=torch.long, device=feats.device)
+        return winner.scatter_reduce_(0, idx, cand, 'amin')[:num_voxels]
     inside = voxel_idx >= 0
     idx = voxel_idx[inside][:, None].expand(-1, channels)
     vals = feats[inside]
@@ -201,8 +214,7 @@ class _LiftPoints:
         # than scatter_reduce_ and needs no (points, C) index tensor.
         vmax = self.depth.new_full((num_voxels + 1, self.channels),
                                    float('-inf'))
-        with warnings.catch_warnings():
-            warnings.filterwarnings('ignore', message='index_reduce')
+        with quiet_index_reduce():
             for feats, vox, _ in self:
                 vmax.index_reduce_(0, vox, feats, 'amax')
         return vmax
@@ -215,8 +227,7 @@ class _LiftPoints:
         """
         winner = torch.full(
             vmax.shape, self.total, dtype=id_dtype, device=vmax.device)
-        with warnings.catch_warnings():
-            warnings.filterwarnings('ignore', message='index_reduce')
+        with quiet_index_reduce():
             for feats, vox, first in self:
                 ids = torch.arange(
                     first,
@@ -303,15 +314,25 @@ class LiftMaxPoolFunction(Function):
         # Blocks of whole voxels bound the temporaries (~60 bytes per
         # voxel-channel entry, far less than the forward's per point).
         block = max(1, 16 * ctx.chunk_size // max(channels, 1))
-        for v0 in range(0, winner.shape[0], block):
+        # GPUs (and compiled code) take every entry, those without a
+        # winner adding a 0 to point 0: no host read of how many have one.
+        every = accelerator_path(grad_out)
+        # No points (no images): no winners, nothing to route.
+        for v0 in range(0, winner.shape[0] if total else 0, block):
             win = winner[v0:v0 + block].long()
             grad = grad_out[v0:v0 + block]
             hit = win != total
-            if not bool(hit.any()):
+            if every:
+                pid = torch.where(hit, win, 0).reshape(-1)
+                chan = torch.arange(
+                    channels, device=win.device).repeat(win.shape[0])
+                g = torch.where(hit, grad, 0.0).reshape(-1)
+            elif not bool(hit.any()):
                 continue
-            pid = win[hit]
-            chan = torch.nonzero(hit)[:, 1]
-            g = grad[hit]
+            else:
+                pid = win[hit]
+                chan = torch.nonzero(hit)[:, 1]
+                g = grad[hit]
             image = pid // (num_bins * num_pixels)
             pixel = image * num_pixels + pid % num_pixels
             if ctx.needs_input_grad[0]:

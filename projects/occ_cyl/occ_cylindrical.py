@@ -16,6 +16,7 @@ from projects.occ_common.models.layers import (POSITION_EMBED_DIMS,
                                                create_frustum,
                                                cylindrical_position_embedding,
                                                frustum_to_lidar)
+from projects.occ_common.utils.eager_island import eager_island
 from .cylindrical import CylinderGrid
 from .group_pooling import PLANE_POOL_AXES
 
@@ -222,9 +223,7 @@ class OccCylindrical(BaseOccDetector):
         out, cam_points = self.lift_images(imgs, lidar2img, cam_params)
         depth, context = out['depth'], out['context']
 
-        # Points outside the cylinder could not reach any voxel.
-        points = [self._inside(p) for p in points]
-        lidar_feats = self.point_branch(
+        points, lidar_feats = self.lidar_features(
             points, context.unflatten(0, (batch_size, num_cams)), lidar2img,
             input_shape, [_img_shape(s) for s in batch_data_samples])
         planes = self.tpv_fusion(depth, context, cam_points, lidar_feats,
@@ -249,11 +248,39 @@ class OccCylindrical(BaseOccDetector):
         """
         return self.occ_head(self.tpv_encoder(planes))
 
-    def _inside(self, points: Tensor) -> Tensor:
-        """Keep the points that reach a voxel (all finite ones when the
-        cylinder clamps). Shape (P', C)."""
-        cyl = cartesian_to_cylindrical(points[:, :3])
-        return points[self.cylinder.voxel_coords(cyl)[1]]
+    @eager_island
+    def lidar_features(self, points: List[Tensor], context: Tensor,
+                       lidar2img: Tensor, input_shape: Tuple[int, int],
+                       img_shapes: List[Tuple[int, int]]
+                       ) -> Tuple[List[Tensor], List[Tensor]]:
+        """The points that reach a voxel and their features (eqs. 2-4).
+
+        Points outside the cylinder could not reach any voxel (with a
+        clamping cylinder, only non-finite points are dropped). How many
+        remain, and which cameras see which, the data decides: under
+        ``torch.compile`` this step is an eager island (one graph break),
+        its outputs' point counts dynamic, so that no point count
+        recompiles the graphs around it.
+
+        Args:
+            points (list[Tensor]): Per sample. Shape (P_i, C).
+            context (Tensor): ``V_context``. Shape (B, N, C_ctx, h, w).
+            lidar2img (Tensor): Shape (B, N, 4, 4).
+            input_shape (tuple[int, int]): Padded network input.
+            img_shapes (list[tuple[int, int]]): Per sample, the augmented
+                image before padding.
+
+        Returns:
+            tuple[list[Tensor], list[Tensor]]: The kept points, each
+            Shape (P'_i, C), and the point branch's features, each
+            Shape (P'_i, C_point).
+        """
+        points = [
+            p[self.cylinder.voxel_coords(cartesian_to_cylindrical(p[:, :3]))
+              [1]] for p in points
+        ]
+        return points, self.point_branch(points, context, lidar2img,
+                                         input_shape, img_shapes)
 
     def loss(self, batch_inputs_dict: dict,
              batch_data_samples: List[Det3DDataSample]) -> Dict[str, Tensor]:

@@ -61,6 +61,14 @@ class TPVPolarFusion(BaseModule):
             Defaults to BN2d.
         with_cp (bool): Recompute the group pooling in the backward
             (:class:`SpatialGroupPooling`'s ``with_cp``). Defaults to False.
+        padded_voxels (bool, optional): Pool each cloud into a list of
+            one row per point instead of one per occupied voxel
+            (:meth:`CylinderGrid.occupied_padded`): no size depends on the
+            data, so ``torch.compile`` traces the pooling without a graph
+            break, for ~3x the camera's pooled rows at paper size (1.74 M
+            pseudo points, ~0.56 M occupied voxels). The planes are the
+            same. Defaults to None: padded while being compiled, compacted
+            otherwise.
         init_cfg (dict, optional): Initialisation config. Defaults to None.
     """
 
@@ -76,8 +84,10 @@ class TPVPolarFusion(BaseModule):
                  lift_chunk_size: Optional[int] = None,
                  norm_cfg: ConfigType = dict(type='BN2d'),
                  with_cp: bool = False,
+                 padded_voxels: Optional[bool] = None,
                  init_cfg: OptMultiConfig = None) -> None:
         super().__init__(init_cfg=init_cfg)
+        self.padded_voxels = padded_voxels
         if not (with_camera or with_lidar):
             raise ValueError('TPVPolarFusion needs at least one modality')
         self.cylinder = cylinder
@@ -117,7 +127,9 @@ class TPVPolarFusion(BaseModule):
         Returns:
             tuple[Tensor, Tensor]: The pooled features of the occupied
             voxels, Shape (U, C), and their flat indices (sample included,
-            :meth:`CylinderGrid.flat_index`), sorted, Shape (U,).
+            :meth:`CylinderGrid.flat_index`), sorted, Shape (U,); with
+            ``padded_voxels``, padding rows after them up to one row per
+            pseudo point (see the comment below).
         """
         batch_size, num_cams = cam_points.shape[:2]
         if depth.shape[0] != batch_size * num_cams or \
@@ -127,9 +139,9 @@ class TPVPolarFusion(BaseModule):
                              f'{tuple(cam_points.shape)}')
         batch_idx = torch.arange(
             batch_size, device=depth.device).view(-1, 1, 1, 1, 1)
-        voxels, rows = self.cylinder.occupied(
-            self.cylinder.flat_index(
-                cartesian_to_cylindrical(cam_points), batch_idx))
+        flat = self.cylinder.flat_index(
+            cartesian_to_cylindrical(cam_points), batch_idx)
+        voxels, rows, filled = self._occupied(flat)
         pooled = lift_max_pool(
             depth,
             context,
@@ -138,6 +150,39 @@ class TPVPolarFusion(BaseModule):
             fused=self.fused_lift,
             chunk_size=self.lift_chunk_size or chunk_items(
                 context, 16 * context.shape[1], CPU_LIFT_CHUNK))
+        return self._park_padding(pooled, voxels, filled)
+
+    def _occupied(self, flat: Tensor
+                  ) -> Tuple[Tensor, Tensor, Optional[Tensor]]:
+        """The occupied voxels and each point's row
+        (:meth:`CylinderGrid.occupied`), or with ``padded_voxels`` one row
+        per point and which rows are filled
+        (:meth:`CylinderGrid.occupied_padded`); else None."""
+        padded = self.padded_voxels
+        if padded is None:
+            padded = torch.compiler.is_compiling()
+        if padded:
+            return self.cylinder.occupied_padded(flat)
+        return (*self.cylinder.occupied(flat), None)
+
+    @staticmethod
+    def _park_padding(pooled: Tensor, voxels: Tensor,
+                      filled: Optional[Tensor]) -> Tuple[Tensor, Tensor]:
+        """Padding rows that change no plane.
+
+        They join the group of the first (smallest) occupied voxel at
+        -inf, which never wins a maximum (nor takes a share of its
+        gradient); with no voxel occupied they are 0s in voxel 0, which
+        is then 0 as an empty group is.
+        """
+        if filled is None or filled.numel() == 0:
+            return pooled, voxels
+        any_voxel = filled[0]
+        voxels = torch.where(filled, voxels,
+                             torch.where(any_voxel, voxels[0], 0))
+        pooled = pooled.masked_fill(
+            ~filled[:, None],
+            torch.where(any_voxel, float('-inf'), 0.0).to(pooled.dtype))
         return pooled, voxels
 
     def lidar_voxels(self, feats: List[Tensor],
@@ -159,10 +204,10 @@ class TPVPolarFusion(BaseModule):
             self.cylinder.flat_index(cartesian_to_cylindrical(p[:, :3]), i)
             for i, p in enumerate(xyz)
         ]
-        voxels, rows = self.cylinder.occupied(torch.cat(index, dim=0))
+        voxels, rows, filled = self._occupied(torch.cat(index, dim=0))
         pooled = voxel_max_pool(
             torch.cat(feats, dim=0), rows, voxels.numel())
-        return pooled, voxels
+        return self._park_padding(pooled, voxels, filled)
 
     def _planes(self, pool: SpatialGroupPooling, pooled: Tensor,
                 voxels: Tensor, batch_size: int) -> Tuple[Tensor, ...]:

@@ -159,9 +159,12 @@ BORDER_CACHE_SIZE = 8
 def _border_cells(height: int, width: int, kernel_size: int, border: str,
                   device) -> BorderCells:
     """:class:`BorderCells` of a map, from a small cache: the indices are
-    built (with their one host sync) once per shape, not per call."""
+    built once per shape, not per call. Code being compiled builds them in
+    its graph instead (from the shape alone, so the compiler may fold them
+    to constants) and leaves the cache alone."""
     key = (height, width, kernel_size, border, str(device))
-    cached = _BORDER_CACHE.get(key)
+    compiling = torch.compiler.is_compiling()
+    cached = None if compiling else _BORDER_CACHE.get(key)
     if cached is not None:
         _BORDER_CACHE.move_to_end(key)
         return cached
@@ -171,9 +174,19 @@ def _border_cells(height: int, width: int, kernel_size: int, border: str,
     cols = torch.arange(width)
     outside = ((rows < reach) | (rows >= height - reach)).view(-1, 1) | \
         ((cols < reach) | (cols >= width - reach)).view(1, -1)
-    if not interior:
+    num = height * width
+    if interior:
+        num -= (height - 2 * reach) * (width - 2 * reach)
+    else:
         outside = torch.ones(height, width, dtype=torch.bool)
-    cell_rows, cell_cols = outside.nonzero(as_tuple=True)
+    # The border cells in row-major order, as nonzero lists them, with a
+    # count known from the shape (nonzero's is data-dependent: a graph
+    # break under torch.compile): sorted by (interior, index), keys all
+    # distinct, so no stable sort is needed (ONNX has none).
+    index = torch.arange(height * width)
+    flat = torch.sort((~outside).flatten().long() * (height * width) +
+                      index)[1][:num]
+    cell_rows, cell_cols = flat // width, flat % width
     key_rows, row_in, bias_rows = _window_slots(height, kernel_size, border,
                                                 cell_rows)
     key_cols, col_in, bias_cols = _window_slots(width, kernel_size, border,
@@ -190,6 +203,8 @@ def _border_cells(height: int, width: int, kernel_size: int, border: str,
         bias=bias.flatten(1).to(device),
         size=height * width,
         interior=interior)
+    if compiling:
+        return cells
     _BORDER_CACHE[key] = cells
     while len(_BORDER_CACHE) > BORDER_CACHE_SIZE:
         _BORDER_CACHE.popitem(last=False)

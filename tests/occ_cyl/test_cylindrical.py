@@ -171,6 +171,32 @@ def test_occupied_compacts_and_unravel_inverts(code_path):
     assert none.numel() == 0 and rows.tolist() == [-1, -1]
 
 
+def test_occupied_padded_keeps_one_row_per_point():
+    """The example above padded to its 5 points: voxels (0, 21, 53) in
+    the first rows, then 2 padding rows (not filled); the same rows
+    (1, -1, 0, 1, 2). All outside: nothing filled, rows -1."""
+    grid = _grid()
+    voxels, rows, filled = grid.occupied_padded(
+        torch.tensor([21, -1, 0, 21, 53]))
+    assert voxels.shape == (5, ) and voxels[:3].tolist() == [0, 21, 53]
+    assert filled.tolist() == [True, True, True, False, False]
+    assert rows.tolist() == [1, -1, 0, 1, 2]
+    _, rows, filled = grid.occupied_padded(torch.tensor([[-1, -1]]))
+    assert not filled.any() and rows.tolist() == [[-1, -1]]
+
+
+def test_occupied_padded_equals_occupied_on_random_indices():
+    """Random flat indices of a (2, 3, 4, 5) batch: the filled rows are
+    :meth:`occupied`'s voxels, the rows the same."""
+    flat = torch.randint(-1, 40, (2, 3, 4, 5),
+                         generator=torch.Generator().manual_seed(0))
+    voxels, rows = _grid().occupied(flat)
+    padded, padded_rows, filled = _grid().occupied_padded(flat)
+    assert int(filled.sum()) == voxels.numel()
+    assert torch.equal(padded[:voxels.numel()], voxels)
+    assert torch.equal(padded_rows, rows)
+
+
 def test_pseudo_point_voxels_hand_computed():
     """One camera at the origin looking along +x, a 16 x 16 image seen as a
     1 x 1 feature map (its cell centre is the principal point, so the ray

@@ -126,6 +126,32 @@ def test_forward_fused_planes_and_backward():
     assert fusion.fusions[0].fuse.conv.weight.grad is not None
 
 
+@pytest.mark.parametrize('spread', [6.0, 100.0])
+def test_padded_camera_voxels_give_the_same_planes(spread):
+    """``padded_voxels`` (what compiled code runs: one pooled row per
+    point of each cloud) gives the fused planes and gradients of the
+    compacted voxels; at a spread of 100 m every point is outside the 4 m
+    cylinder (no voxel occupied, no gradient reaches depth or context)."""
+    depth, ctx, cam_pts, feats, xyz = _inputs(points=(6, 3))
+    cam_pts = cam_pts / 6 * spread
+    xyz = [p / 6 * spread for p in xyz]
+    results = []
+    for padded in (False, True):
+        fusion = _fusion(padded_voxels=padded)
+        d, c = depth.clone().requires_grad_(), ctx.clone().requires_grad_()
+        planes = fusion(d, c, cam_pts, feats, xyz)
+        sum((p * torch.arange(p.numel()).view_as(p)).sum()
+            for p in planes).backward()
+        results.append((planes, d.grad, c.grad))
+    (planes, *grads), (padded_planes, *padded_grads) = results
+    for a, b in zip(planes, padded_planes):
+        torch.testing.assert_close(a, b, rtol=0, atol=0)
+    for a, b in zip(grads, padded_grads):
+        torch.testing.assert_close(a, b, rtol=1e-6, atol=1e-6)
+    if spread > 50:
+        assert all(float(g.abs().sum()) == 0 for g in padded_grads)
+
+
 def test_single_modality_and_errors():
     """Camera-only returns the camera planes unfused; missing inputs and
     an M that does not divide the grid are named."""

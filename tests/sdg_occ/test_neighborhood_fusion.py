@@ -292,3 +292,27 @@ def test_launches_do_not_grow_with_the_batch():
     # 49 slot products (mul, sum) and 49 weighted values (mul, add) make
     # ~200 of them; the border, the projections and the gate ~40.
     assert counts[0]['launches'] < 260
+
+
+@pytest.mark.parametrize('kernel_size', [3, 5])
+def test_border_cells_are_the_cells_outside_the_interior(kernel_size):
+    """The border cells come from a sort with a count fixed by the shape
+    (what compiled code traces), no longer from ``nonzero``; they are
+    still every cell within ``k // 2`` of an edge, in row-major order, and
+    every cell when the map has no interior: checked against a direct
+    listing on maps from 1 x 1 to 7 x 6 (a 5 x 5 map with k = 5 has the
+    single interior cell (2, 2), so 24 border cells)."""
+    reach = kernel_size // 2
+    for height in range(1, 8):
+        for width in range(1, 7):
+            edge = nf._border_cells(height, width, kernel_size, 'shift',
+                                    'cpu')
+            interior = height > 2 * reach and width > 2 * reach
+            expected = [
+                i * width + j for i in range(height) for j in range(width)
+                if not interior or min(i, j) < reach
+                or i >= height - reach or j >= width - reach
+            ]
+            assert edge.cells.tolist() == expected, (height, width)
+            assert edge.interior == interior
+    assert nf._border_cells(5, 5, 5, 'shift', 'cpu').cells.numel() == 24

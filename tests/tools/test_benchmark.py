@@ -136,3 +136,38 @@ def test_train_mode_steps_the_optimiser():
     assert reports['train']['gflop'] * 1e9 == pytest.approx(2 * 4608)
     with pytest.raises(SystemExit):
         tool.parse_args([CONFIG, '--train', '--fuse-conv-bn'])
+
+
+def test_eager_vs_compiled_times_the_config_twice(monkeypatch, capsys):
+    """--eager-vs-compiled: the toy eager, then its test_step through
+    torch.compile (here Dynamo with the eager backend, to keep the test
+    fast; the tool's own default is inductor), in alternating rounds:
+    GFLOP counted on the eager step in both (ratio exactly 1), the
+    compiled step traced by Dynamo; --compare and no warm-up are
+    refused."""
+    graphs = []
+    compile_ = torch.compile
+
+    def counting(fn, mode=None, **kwargs):
+        def backend(gm, example_inputs):
+            graphs.append(gm)
+            return gm.forward
+
+        assert mode is None  # 'default' passes no mode
+        return compile_(fn, backend=backend, **kwargs)
+
+    monkeypatch.setattr(torch, 'compile', counting)
+    torch._dynamo.reset()
+    tool = _tool()
+    report = tool.main([CONFIG, '--eager-vs-compiled', '--runs', '3',
+                        '--warmup', '1', '--device', 'cpu',
+                        '--matmul-size', '0'])
+    eager, compiled = report['models']
+    assert (eager['compiled'], compiled['compiled']) == (None, 'default')
+    assert report['ratio']['gflop'] == 1.0 and compiled['gflop'] > 0
+    assert len(compiled['latency_ms']['runs']) == 3
+    assert graphs
+    assert 'torch.compile' in capsys.readouterr().out
+    for bad in (['--compare', CONFIG], ['--warmup', '0']):
+        with pytest.raises(SystemExit):
+            tool.parse_args([CONFIG, '--eager-vs-compiled', *bad])

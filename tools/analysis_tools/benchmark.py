@@ -27,6 +27,13 @@ iteration instead (``model.train_step`` with the config's
 ``optim_wrapper``: preprocessing, the loss forward, backward and the
 optimiser step), and its peak memory; synthetic batches then carry random
 occupancy labels and sparse LiDAR depth maps.
+``--compile [MODE]`` times the step under ``torch.compile`` (``test_step``,
+or ``train_step`` with ``--train``, as mmengine's ``compile=True`` and
+``TorchCompileHook`` compile them; every cloud's point count marked
+dynamic; ``reduce-overhead`` replays CUDA graphs on a GPU); compilation
+happens in the warm-up, so give it at least one. ``--eager-vs-compiled``
+times the config eager and compiled side by side in alternating rounds
+(ratio compiled / eager). The GFLOP are counted on the eager step.
 
 What is timed is ``model.test_step(batch)``: the data preprocessor
 (normalisation, voxelisation), the forward pass and the prediction
@@ -71,11 +78,17 @@ from projects.occ_common.analysis.benchmarking import (PeakMemory,
                                                        matmul_share, summarise)
 from projects.occ_common.engine.config_checks import (cfg_errors_exit,
                                                       merge_cfg_options)
+from projects.occ_common.engine.hooks.torch_compile_hook import \
+    mark_dynamic_points
 from projects.occ_common.synthetic.synthetic_batch import (
     NUSCENES_SWEEP_POINTS, synthetic_batch)
 from projects.occ_common.utils.glibc_malloc import (MMAP_THRESHOLD,
                                                     TRIM_THRESHOLD,
                                                     tune_glibc_malloc)
+
+#: ``torch.compile`` modes of ``--compile`` ('default': no mode given).
+COMPILE_MODES = ('default', 'reduce-overhead', 'max-autotune',
+                 'max-autotune-no-cudagraphs')
 
 
 def parse_args(argv=None):
@@ -131,6 +144,19 @@ def parse_args(argv=None):
         help='time one training iteration (train_step: loss, backward, '
         'optimiser step) instead of a prediction')
     parser.add_argument(
+        '--compile',
+        nargs='?',
+        const='default',
+        choices=COMPILE_MODES,
+        help='time the step under torch.compile with this mode (default: '
+        "'default'; 'reduce-overhead' replays CUDA graphs on a GPU); with "
+        '--compare both models')
+    parser.add_argument(
+        '--eager-vs-compiled',
+        action='store_true',
+        help='time CONFIG eager and compiled (--compile\'s mode) side by '
+        'side in alternating rounds; the ratio is compiled / eager')
+    parser.add_argument(
         '--matmul-size',
         type=int,
         default=2048,
@@ -149,6 +175,11 @@ def parse_args(argv=None):
         parser.error('--channels-last goes with --fuse-conv-bn.')
     if args.train and args.fuse_conv_bn:
         parser.error('--fuse-conv-bn is inference only; not with --train.')
+    if args.eager_vs_compiled and args.compare is not None:
+        parser.error('--eager-vs-compiled compares CONFIG with itself; not '
+                     'with --compare.')
+    if (args.compile or args.eager_vs_compiled) and args.warmup < 1:
+        parser.error('--compile compiles in the warm-up: --warmup >= 1.')
     if args.runs < 1 or args.warmup < 0 or args.batch_size < 1:
         parser.error('expected --runs >= 1, --warmup >= 0, --batch-size '
                      '>= 1.')
@@ -199,9 +230,13 @@ class Subject:
         config (str): Config file.
         checkpoint (str, optional): Weights to load.
         args (argparse.Namespace): The command line.
+        compile_mode (str, optional): ``torch.compile`` the timed step
+            with this mode (:data:`COMPILE_MODES`). Defaults to None
+            (eager).
     """
 
-    def __init__(self, config: str, checkpoint: Optional[str], args) -> None:
+    def __init__(self, config: str, checkpoint: Optional[str], args,
+                 compile_mode: Optional[str] = None) -> None:
         from projects.occ_common.apis import init_model
         cfg = load_config(config, args.cfg_options)
         self.config, self.checkpoint = config, checkpoint
@@ -223,6 +258,12 @@ class Subject:
             import projects.occ_common.models.deploy as deploy
             self.folded_bn = deploy.fuse_backbone_conv_bn(
                 self.model, channels_last=args.channels_last)
+        self.compile_mode = compile_mode
+        if compile_mode is not None:
+            step = 'train_step' if self.train else 'test_step'
+            setattr(self.model, step, torch.compile(
+                getattr(self.model, step),
+                mode=None if compile_mode == 'default' else compile_mode))
         if args.synthetic_batch:
             self.batch, self.described = synthetic_batch(
                 cfg, args.batch_size, args.num_points, labels=args.train)
@@ -233,6 +274,8 @@ class Subject:
     def fresh_input(self) -> None:
         """A fresh copy of the batch: ``test_step`` writes into it."""
         self._data = copy.deepcopy(self.batch)
+        if self.compile_mode is not None:
+            mark_dynamic_points(self._data)
 
     def predict(self) -> None:
         """One prediction (with ``--train`` one training iteration) on the
@@ -246,7 +289,8 @@ class Subject:
     def static_report(self) -> Dict:
         """Parameters, GFLOP and peak memory of one prediction."""
         self.fresh_input()
-        gflop = count_gflop(self.predict)
+        with torch.compiler.set_stance('force_eager'):
+            gflop = count_gflop(self.predict)
         self.fresh_input()
         with PeakMemory(self.device) as memory:
             self.predict()
@@ -263,6 +307,7 @@ class Subject:
             trainable_params=trainable,
             gflop=gflop,
             mode='train' if self.train else 'predict',
+            compiled=self.compile_mode,
             folded_bn=self.folded_bn,
             peak_memory_mb=memory.peak_bytes / 2**20,
             forward_memory_mb=memory.added_bytes / 2**20,
@@ -343,6 +388,7 @@ def format_table(report: Dict) -> str:
     rows: List[Tuple[str, Callable[[Dict], str]]] = [
         ('model', lambda r: r['model']),
         ('timed call', lambda r: r['mode']),
+        ('torch.compile', lambda r: r.get('compiled') or 'no'),
         ('params', lambda r: f'{r["params"]:,}'),
         ('latency median (ms)', lambda r: f'{r["latency_ms"]["median"]:.2f}'),
         ('latency std (ms)', lambda r: f'{r["latency_ms"]["std"]:.2f}'),
@@ -404,10 +450,17 @@ def main(argv=None) -> Dict:
     if args.keep_freed_memory:
         malloc = ('keeps freed memory' if tune_glibc_malloc(
             MMAP_THRESHOLD, TRIM_THRESHOLD) else 'unchanged (not glibc)')
-    subjects = [Subject(args.config, args.checkpoint, args)]
+    mode = args.compile or ('default' if args.eager_vs_compiled else None)
+    subjects = [
+        Subject(args.config, args.checkpoint, args,
+                None if args.eager_vs_compiled else mode)
+    ]
     if args.compare:
         subjects.append(
-            Subject(args.compare[0], (args.compare[1:] or [None])[0], args))
+            Subject(args.compare[0], (args.compare[1:] or [None])[0], args,
+                    mode))
+    elif args.eager_vs_compiled:
+        subjects.append(Subject(args.config, args.checkpoint, args, mode))
     models, rate = benchmark_models(subjects, args)
     report = dict(
         device=args.device,
@@ -419,7 +472,7 @@ def main(argv=None) -> Dict:
         matmul_gflops=None if rate is None else rate['median'],
         matmul_gflops_rounds=rate,
         models=models)
-    if args.compare:
+    if len(subjects) > 1:
         report['ratio'] = ratios(*report['models'])
     print(format_table(report))
     if args.json:

@@ -50,7 +50,9 @@ from projects.occ_common.analysis.tool_runs import (LARGE_CLASS_MIN_IOU,
                                                     occupancy_metric, pct,
                                                     prepare_world,
                                                     read_json_lines, run,
-                                                    stretched_times, tool)
+                                                    scene_names,
+                                                    stretched_times, tool,
+                                                    train_label_options)
 from projects.occ_common.evaluation import (largest_confusions,
                                             read_confusion_csv)
 
@@ -194,6 +196,12 @@ def parse_args(argv=None):
     parser.add_argument(
         '--cfg-options', nargs='+', default=[], metavar='KEY=VALUE',
         help='overrides applied to every run (part of its settings)')
+    parser.add_argument(
+        '--train-labels', metavar='DIR',
+        help='train on the labels under DIR (gts/, nuscenes_occ/ of the '
+        'same world, e.g. from tools/dataset_converters/'
+        'generate_occupancy.py) instead of the world\'s own; validation '
+        'and test keep the world\'s labels (part of the run\'s settings)')
     parser.add_argument(
         '--suffix', default='',
         help='appended to every run name, e.g. to keep a variant made with '
@@ -654,10 +662,14 @@ def main(argv=None):
                   args.image_size, args.val_scenes, args.seed)
     runs = [(name, *RUNS[name]) for name in args.runs]
     runs += [(name, config, []) for name, config in args.config]
+    common = list(args.cfg_options)
+    if args.train_labels:
+        common += train_label_options(
+            data_root, args.train_labels, log_path,
+            scene_names(args.scenes - args.val_scenes + 1, args.val_scenes))
     for name, config, options in runs:
-        bench_run(name + args.suffix, config,
-                  list(options) + list(args.cfg_options), args, data_root,
-                  out, log_path)
+        bench_run(name + args.suffix, config, list(options) + common, args,
+                  data_root, out, log_path)
     # The table holds every finished run of OUT, also those of earlier
     # invocations (other budgets or options: see each run's settings).
     rows = [_load_json(path) for path in sorted(

@@ -1,12 +1,17 @@
 #!/usr/bin/env bash
 # What a GPU must show before a paper config trains on it, in about 8
-# minutes on one GPU, everything written as JSON (or JUnit XML) to OUT_DIR:
+# minutes on one GPU (steps 1-3; step 4 compiles, minutes per model),
+# everything written as JSON (or JUnit XML) to OUT_DIR:
 #   1. cuda_tests.xml  the tests marked `cuda` (CUDA kernels, CUDA autocast)
 #   2. ddp_nccl.json   with 2+ GPUs: the paper models, 2 nccl ranks x 3 steps
 #   3. train_fp32.json, train_amp_fp16.json, train_amp_bf16.json:
 #      5 training steps of each paper model at the paper's input size and
 #      batch, one GPU (seconds a step, peak CUDA memory, losses)
-#   4. summary.json    each step's exit status and seconds
+#   4. compiled_*.json, cudagraph_*.json: each paper model's prediction
+#      eager and under torch.compile (inductor; then mode reduce-overhead,
+#      CUDA graphs), side by side in alternating rounds (benchmark.py
+#      --eager-vs-compiled; the compilation adds minutes per model)
+#   5. summary.json    each step's exit status and seconds
 # Usage (from the repository root, in the environment that has CUDA torch):
 #   bash tools/analysis_tools/gpu_check.sh [OUT_DIR]   # default work_dirs/gpu_check
 # PYTHON picks the interpreter (default: python). Exit status: the number of
@@ -60,6 +65,17 @@ for amp in fp16 bf16; do
     step "train_amp_$amp" 90 "$PYTHON" tools/analysis_tools/ddp_check.py \
         "${PAPER_CONFIGS[@]}" --ranks 1 --iters 5 --device cuda \
         --amp "$amp" --json "$OUT/train_amp_$amp.json"
+done
+for cfg in "${PAPER_CONFIGS[@]}"; do
+    name=$(basename "$cfg" .py)
+    for mode in default reduce-overhead; do
+        kind=compiled
+        [ "$mode" = reduce-overhead ] && kind=cudagraph
+        step "${kind}_$name" 600 "$PYTHON" tools/analysis_tools/benchmark.py \
+            "$cfg" --synthetic-batch --device cuda --eager-vs-compiled \
+            --compile "$mode" --warmup 3 --runs 10 \
+            --json "$OUT/${kind}_$name.json"
+    done
 done
 
 {

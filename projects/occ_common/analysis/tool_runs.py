@@ -188,6 +188,65 @@ def prepare_world(data_root: str,
         run(cmd, log_path, 'conversion')
 
 
+#: Label folders of a dataset root (and of generated labels), as
+#: ``tools/create_data.py`` reads them: Occ3D, SurroundOcc.
+LABEL_DIRS = ('gts', 'nuscenes_occ')
+
+
+def train_label_options(data_root: str, labels_dir: str, log_path: str,
+                        val_scenes: Optional[Sequence[str]] = None
+                        ) -> List[str]:
+    """``--cfg-options`` that train on other labels of the same world.
+
+    ``labels_dir`` holds ``gts/`` and ``nuscenes_occ/`` in the layouts of
+    ``data_root`` (e.g. written by
+    ``tools/dataset_converters/generate_occupancy.py``). Every label file
+    ``data_root`` has must have its counterpart there (checked first: a
+    missing one would silently drop its sample from training). An info
+    file linking them is written once into ``labels_dir`` with
+    ``tools/create_data.py`` (the same split), and the train dataloader is
+    pointed at it; validation and test keep ``data_root``'s labels.
+
+    Args:
+        data_root (str): Converted dataset root.
+        labels_dir (str): The other labels.
+        log_path (str): Log file of the conversion's output.
+        val_scenes (Sequence[str], optional): The val scenes the world
+            was converted with (the same split). Defaults to the
+            converter's rule.
+
+    Returns:
+        list[str]: ``['train_dataloader.dataset.ann_file=<info file>']``.
+
+    Raises:
+        SystemExit: A label file of ``data_root`` has no counterpart in
+            ``labels_dir``.
+    """
+    labels_dir = osp.abspath(labels_dir)
+    for folder in LABEL_DIRS:
+        own = sorted(glob.glob(osp.join(data_root, folder, '**', '*.np[yz]'),
+                               recursive=True))
+        missing = [p for p in own if not osp.isfile(osp.join(
+            labels_dir, osp.relpath(p, data_root)))]
+        if missing:
+            raise SystemExit(
+                f'{labels_dir} lacks {len(missing)} of the {len(own)} '
+                f'label files of {data_root}/{folder}, e.g. '
+                f'{osp.relpath(missing[0], data_root)}: generate labels '
+                'for every scene first.')
+    info = osp.join(labels_dir, f'{INFO_PREFIX}_infos_train.pkl')
+    if not osp.isfile(info):
+        cmd = tool('tools/create_data.py') + [
+            'nuscenes', '--root-path', data_root, '--version', 'v1.0-mini',
+            '--occ3d-root', osp.join(labels_dir, LABEL_DIRS[0]),
+            '--surroundocc-root', osp.join(labels_dir, LABEL_DIRS[1]),
+            '--out-dir', labels_dir]
+        if val_scenes:
+            cmd += ['--val-scenes'] + list(val_scenes)
+        run(cmd, log_path, 'conversion of the training labels')
+    return [f'train_dataloader.dataset.ann_file={info}']
+
+
 def evaluator_keys(cfg, split: str) -> List[tuple]:
     """``(option key, evaluator config)`` of every evaluator of a split.
 

@@ -1,9 +1,12 @@
-"""Geometry shared by transforms, models and losses (torch only, no registry).
+"""Geometry shared by transforms, models and losses (no registry).
 
 :mod:`.depth` defines the depth bins and the sparse LiDAR depth maps;
 :mod:`.bev_warp` aligns a previous frame's BEV with the current frame;
 :mod:`.seg_targets` brings sparse 2-D semantic labels to feature resolution;
-:mod:`.inverse` inverts 4x4 matrices in a form that exports to ONNX.
+:mod:`.inverse` inverts 4x4 matrices in a form that exports to ONNX (all
+torch); :mod:`.voxel_walk` walks rays through voxel grids (numpy: the
+synthetic world's masks and the occupancy label generator), imported from
+its module.
 """
 from .bev_warp import relative_pose, warp_bev
 from .depth import (depth_bin_values, depth_to_bins, nearest_depth_map,

@@ -15,46 +15,20 @@ Two label formats are produced for every key frame:
 A voxel is occupied when any of its ``s^3`` sub-sample points lies inside
 an object (or the ground slab); objects are written after buildings,
 vegetation and the ground, so small things keep their voxels. Ray
-traversal is an exact voxel walk (Amanatides & Woo, "A fast voxel
-traversal algorithm for ray tracing", 1987), vectorised over rays.
+traversal is the exact voxel walk of :mod:`..geometry.voxel_walk`
+(Amanatides & Woo, 1987), vectorised over rays; the occupancy label
+generator walks the same way.
 """
-from dataclasses import dataclass
-from typing import Optional, Tuple
-
 import numpy as np
 
 from ..datasets.nuscenes_classes import LIDARSEG_RAW_TO_OCC16, OCC3D_FREE_LABEL
+from ..geometry.voxel_walk import OccGrid, traverse
 from .geometry import invert_transform
 from .world import GROUND_THICKNESS, World
 
 #: Marker of empty voxels in the raw-class grids of this module.
 RAW_FREE = 255
 _STUFF_CLASSES = (28, 30, 29)  # manmade, vegetation, static.other
-
-
-@dataclass(frozen=True)
-class OccGrid:
-    """A regular voxel grid.
-
-    Args:
-        lower (Tuple[float, float, float]): Minimum x, y, z corner, m.
-        voxel_size (float): Edge of a voxel, m.
-        shape (Tuple[int, int, int]): Voxels along x, y, z.
-    """
-    lower: Tuple[float, float, float]
-    voxel_size: float
-    shape: Tuple[int, int, int]
-
-    @property
-    def upper(self) -> np.ndarray:
-        """Maximum x, y, z corner. Shape (3,)."""
-        return np.asarray(self.lower) + np.asarray(self.shape) * (
-            self.voxel_size)
-
-    def centers(self, axis: int) -> np.ndarray:
-        """Voxel centre coordinates along one axis. Shape (shape[axis],)."""
-        return self.lower[axis] + (np.arange(self.shape[axis]) + 0.5) * (
-            self.voxel_size)
 
 
 #: SurroundOcc's grid (LiDAR frame).
@@ -178,69 +152,6 @@ def to_occ3d_semantics(raw_grid: np.ndarray) -> np.ndarray:
     free = raw_grid == RAW_FREE
     semantics = LIDARSEG_RAW_TO_OCC16[np.where(free, 0, raw_grid)]
     return np.where(free, OCC3D_FREE_LABEL, semantics).astype(np.uint8)
-
-
-def traverse(grid: OccGrid, origins: np.ndarray, dirs: np.ndarray,
-             lengths: np.ndarray,
-             occupied: Optional[np.ndarray] = None) -> np.ndarray:
-    """Voxels that rays walk through (exact voxel traversal).
-
-    Every ray starts at its origin and ends after ``length`` metres, or at
-    the first voxel of ``occupied`` it enters (that voxel is included),
-    whichever comes first.
-
-    Args:
-        grid (OccGrid): The grid; origins and directions are in its frame.
-        origins (np.ndarray): Ray origins. Shape (R, 3) or (3,).
-        dirs (np.ndarray): Unit ray directions. Shape (R, 3).
-        lengths (np.ndarray): Ray lengths, metres. Shape (R,).
-        occupied (np.ndarray, optional): Voxels that stop a ray. Shape
-            (X, Y, Z). Defaults to None (rays run their full length).
-
-    Returns:
-        np.ndarray: Visited voxels. Shape (X, Y, Z), bool.
-    """
-    shape = np.asarray(grid.shape)
-    lower = np.asarray(grid.lower, dtype=np.float64)
-    visited = np.zeros(int(np.prod(shape)), dtype=bool)
-    dirs = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
-    origins = np.broadcast_to(np.asarray(origins, np.float64), dirs.shape)
-    tiny = np.where(dirs >= 0, 1e-12, -1e-12)
-    inverse = 1.0 / np.where(np.abs(dirs) < 1e-12, tiny, dirs)
-    t_a = (lower - origins) * inverse
-    t_b = (grid.upper - origins) * inverse
-    t_enter = np.maximum(np.minimum(t_a, t_b).max(axis=1), 0.0)
-    t_end = np.minimum(np.maximum(t_a, t_b).min(axis=1), lengths)
-    keep = t_enter <= t_end
-    origins, dirs, inverse = origins[keep], dirs[keep], inverse[keep]
-    t_enter, t_end = t_enter[keep], t_end[keep]
-    start = origins + t_enter[:, None] * dirs
-    voxel = np.clip(np.floor((start - lower) / grid.voxel_size), 0,
-                    shape - 1).astype(np.int64)
-    sign = np.where(dirs >= 0, 1, -1)
-    boundary = lower + (voxel + (sign > 0)) * grid.voxel_size
-    t_next = (boundary - origins) * inverse
-    t_delta = grid.voxel_size * np.abs(inverse)
-    occupied_flat = None if occupied is None else occupied.ravel()
-    strides = np.array([shape[1] * shape[2], shape[2], 1])
-    while len(voxel):
-        flat = voxel @ strides
-        visited[flat] = True
-        rows = np.arange(len(voxel))
-        axis = np.argmin(t_next, axis=1)
-        t_axis = t_next[rows, axis]
-        stop = t_axis > t_end
-        if occupied_flat is not None:
-            stop |= occupied_flat[flat]
-        voxel[rows, axis] += sign[rows, axis]
-        t_next[rows, axis] += t_delta[rows, axis]
-        moved = voxel[rows, axis]
-        stop |= (moved < 0) | (moved >= shape[axis])
-        if stop.any():
-            go = ~stop
-            voxel, t_next, t_delta = voxel[go], t_next[go], t_delta[go]
-            sign, t_end = sign[go], t_end[go]
-    return visited.reshape(grid.shape)
 
 
 def lidar_mask(grid: OccGrid, world2grid: np.ndarray, sweeps: list

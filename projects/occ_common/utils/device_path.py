@@ -6,6 +6,12 @@ Python loop whose small operations cost little there) and one for GPUs
 (few large operations: each launch costs a GPU ~5-20 us of host time).
 They ask :func:`accelerator_path`. ``tools/analysis_tools/count_ops.py``
 counts a GPU's launches on the CPU under :func:`forced_accelerator_path`.
+
+Code traced by ``torch.compile`` takes the GPU path on every device: the
+CPU path's compactions (``nonzero``, boolean masks, ``unique``) have
+data-dependent output sizes, each a graph break, while the GPU path keeps
+every shape fixed by the input sizes (both paths give the same results;
+the tests compare them).
 """
 import contextlib
 import os
@@ -24,10 +30,11 @@ _FORCED: Optional[bool] = None
 
 def accelerator_path(tensor: Tensor) -> bool:
     """Whether to take the path written for GPUs: ``tensor`` is not on the
-    CPU, unless :func:`forced_accelerator_path` says otherwise."""
+    CPU or the code is being compiled (``torch.compiler.is_compiling``),
+    unless :func:`forced_accelerator_path` says otherwise."""
     if _FORCED is not None:
         return _FORCED
-    return tensor.device.type != 'cpu'
+    return tensor.device.type != 'cpu' or torch.compiler.is_compiling()
 
 
 @contextlib.contextmanager
@@ -49,7 +56,10 @@ def chunk_items(tensor: Tensor, bytes_per_item: int, cpu_items: int,
     path, as many as fit in ``share`` of the device's free memory at
     ``bytes_per_item`` each (the loop's temporaries per item), so that a
     paper-size lift runs in one or two chunks instead of a hundred
-    launches' worth of small ones.
+    launches' worth of small ones. Compiled code assumes
+    :data:`ASSUMED_FREE_BYTES` instead of reading the free memory, which
+    changes from call to call: a chunk count read at run time would be a
+    graph break and a recompilation whenever it changed.
 
     Args:
         tensor (Tensor): Decides the device.
@@ -62,7 +72,7 @@ def chunk_items(tensor: Tensor, bytes_per_item: int, cpu_items: int,
     """
     if not accelerator_path(tensor):
         return cpu_items
-    if tensor.is_cuda:
+    if tensor.is_cuda and not torch.compiler.is_compiling():
         free, _ = torch.cuda.mem_get_info(tensor.device)
     else:
         free = ASSUMED_FREE_BYTES

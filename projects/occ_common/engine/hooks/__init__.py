@@ -14,6 +14,7 @@ from .non_finite_loss_hook import NonFiniteLossError, NonFiniteLossHook
 from .occ_visualization_hook import OccVisualizationHook
 from .random_state_hook import RandomStateHook
 from .safe_checkpoint_hook import SafeCheckpointHook
+from .torch_compile_hook import TorchCompileHook
 from .weights_only_checkpoint_hook import WeightsOnlyCheckpointHook
 from .work_dir_lock_hook import WorkDirLockHook
 
@@ -21,6 +22,6 @@ __all__ = [
     'AugmentationSeedHook', 'CheckpointMatchHook',
     'CheckpointRecoveryHook', 'CPUMallocTuningHook', 'MainProcessLoggerHook',
     'NonFiniteLossError', 'NonFiniteLossHook', 'OccVisualizationHook',
-    'RandomStateHook', 'SafeCheckpointHook', 'WeightsOnlyCheckpointHook',
-    'WorkDirLockHook'
+    'RandomStateHook', 'SafeCheckpointHook', 'TorchCompileHook',
+    'WeightsOnlyCheckpointHook', 'WorkDirLockHook'
 ]

@@ -388,13 +388,22 @@ class BaseOccDetector(Base3DDetector):
         if 'seg_logits' not in depth_out:
             raise ValueError(f'{type(self).__name__}: loss_seg needs a '
                              'DepthNet with seg_channels > 0')
-        target = self.seg_targets(samples, gt_depth, downsample)
+        target = self.seg_targets(samples, gt_depth, downsample).reshape(-1)
         logits = depth_out['seg_logits']
+        kwargs = {}
+        if getattr(self.loss_seg, 'avg_non_ignore', False):
+            # mmdet's CrossEntropyLoss(avg_non_ignore=True) would count the
+            # labels that are not ignored with a host read (a sync, a graph
+            # break under torch.compile); the same count, given as its
+            # avg_factor, stays on the device.
+            ignore = getattr(self.loss_seg, 'ignore_index', None)
+            kwargs['avg_factor'] = (
+                target != (-100 if ignore is None else ignore)).sum()
         return {
             'loss_seg':
             self.loss_seg(
                 logits.permute(0, 2, 3, 1).reshape(-1, logits.shape[1]),
-                target.reshape(-1))
+                target, **kwargs)
         }
 
     @staticmethod

@@ -27,7 +27,9 @@ boolean mask of the rows at their cell's maximum (a quarter of the input's
 bytes) and the gradient it returns; the float temporaries are made in
 chunks of rows.
 """
+import contextlib
 import warnings
+from typing import Iterator
 
 import torch
 from torch import Tensor
@@ -39,10 +41,24 @@ from torch.autograd.function import once_differentiable
 CHUNK_ROWS = 1 << 16
 
 
-def _amax_rows(feats: Tensor, cell: Tensor, num_cells: int) -> Tensor:
-    """The forward: per-cell, per-channel maximum, 0 where no row goes."""
+@contextlib.contextmanager
+def quiet_index_reduce() -> Iterator[None]:
+    """Silence torch's "index_reduce() is in beta" warning inside the block.
+
+    Not while ``torch.compile`` traces: Dynamo cannot trace the warnings
+    filter (a graph break), and the compiled kernel does not warn.
+    """
+    if torch.compiler.is_compiling():
+        yield
+        return
     with warnings.catch_warnings():
         warnings.filterwarnings('ignore', message='index_reduce')
+        yield
+
+
+def _amax_rows(feats: Tensor, cell: Tensor, num_cells: int) -> Tensor:
+    """The forward: per-cell, per-channel maximum, 0 where no row goes."""
+    with quiet_index_reduce():
         # In place on zeros: the out-of-place index_reduce would copy the
         # zeros first.
         return feats.new_zeros(num_cells, feats.shape[1]).index_reduce_(
@@ -63,8 +79,12 @@ class CellMaxFunction(Function):
     def backward(ctx, grad_out: Tensor):
         feats, cell, out = ctx.saved_tensors
         grad_out = grad_out.contiguous()
-        chunks = [(start, min(start + CHUNK_ROWS, feats.shape[0]))
-                  for start in range(0, feats.shape[0], CHUNK_ROWS)]
+        # Compiled code makes no chunks: their number would fix the row
+        # count (a dynamic size under torch.compile) to the one traced,
+        # and the compiler fuses the temporaries away anyway.
+        chunks = ([(0, feats.shape[0])] if torch.compiler.is_compiling()
+                  else [(start, min(start + CHUNK_ROWS, feats.shape[0]))
+                        for start in range(0, feats.shape[0], CHUNK_ROWS)])
         at_max = torch.empty_like(feats, dtype=torch.bool)
         for start, end in chunks:
             torch.eq(feats[start:end],

@@ -8,6 +8,7 @@ from mmdet3d.registry import MODELS
 from torch import Tensor
 
 from ...geometry.depth import depth_to_bins, num_depth_bins
+from ...utils.device_path import accelerator_path
 
 
 @MODELS.register_module()
@@ -84,7 +85,11 @@ class DepthBCELoss(nn.Module):
                                       self.depth_bound, self.nearest_bin)
         pred = depth_pred.float().permute(0, 2, 3, 1).reshape(
             -1, self.num_bins)
-        picked = pred[valid]
+        # The GPU path (and compiled code) keeps every cell, those without
+        # a target masked out of the sum: selecting them would read their
+        # number on the host (a sync, a graph break).
+        masked = accelerator_path(pred)
+        picked = pred if masked else pred[valid]
         # Non-finite probabilities (a diverging step, or NaN inputs) would
         # make BCE raise ("all elements of input should be between 0 and
         # 1"; a device assert on CUDA). BCE gets a stand-in of 0.5 there
@@ -92,14 +97,19 @@ class DepthBCELoss(nn.Module):
         # the iteration and this term's name. No host sync is needed.
         finite = torch.isfinite(picked)
         safe = torch.where(finite, picked, torch.full_like(picked, 0.5))
+        if masked:
+            finite = finite | ~valid[:, None]
         # Over an empty selection the sum is a connected zero, so the
         # no-LiDAR batch needs no special case. CUDA autocast refuses
         # binary_cross_entropy outright (``--amp``), so it runs outside it,
         # in float32, as BEVDepth does.
         with torch.autocast(device_type=pred.device.type, enabled=False):
             bce = F.binary_cross_entropy(
-                safe.clamp(0.0, 1.0), target[valid], reduction='none').sum()
-        loss = bce / valid.sum().clamp(min=1)
+                safe.clamp(0.0, 1.0), target if masked else target[valid],
+                reduction='none')
+        if masked:
+            bce = torch.where(valid[:, None], bce, torch.zeros_like(bce))
+        loss = bce.sum() / valid.sum().clamp(min=1)
         loss = torch.where(finite.all(), loss,
                            torch.full_like(loss, float('nan')))
         return self.loss_weight * loss

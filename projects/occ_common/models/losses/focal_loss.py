@@ -60,4 +60,4 @@ class OccFocalLoss(OccupancyLossTerm):
             weight = torch.tensor(
                 self.class_weight, dtype=loss.dtype, device=loss.device)
             loss = loss * weight[labels]
-        return loss.mean()
+        return voxels.mean(loss)

@@ -23,7 +23,8 @@ def lovasz_softmax_flat(
         probs: Tensor,
         labels: Tensor,
         classes: Union[str, Sequence[int]] = 'present',
-        class_weight: Optional[Sequence[float]] = None) -> Optional[Tensor]:
+        class_weight: Optional[Sequence[float]] = None,
+        mask: Optional[Tensor] = None) -> Optional[Tensor]:
     """Lovasz-softmax loss of supervised voxels, all classes at once.
 
     Implements eq. 12 and Algorithm 1 of Berman et al., "The Lovasz-Softmax
@@ -42,13 +43,27 @@ def lovasz_softmax_flat(
             an explicit list of class indices. Defaults to 'present'.
         class_weight (Sequence[float], optional): Per-class factor applied
             before averaging. Defaults to None.
+        mask (Tensor, optional): bool, the voxels that count (the GPU
+            path's :class:`~.utils.SupervisedVoxels`); the others get no
+            error, no slope and no gradient. Defaults to None (all).
+            Shape (N,).
 
     Returns:
         Tensor | None: Scalar loss, or None when no class is selected (no
-        supervised voxel with ``'present'``).
+        supervised voxel with ``'present'``). On the GPU path, which reads
+        nothing on the host, every class is sorted (the unselected ones
+        are left out of the mean) and the result is 0 instead of None.
     """
     num_classes = probs.shape[1]
-    total = torch.bincount(labels, minlength=num_classes)
+    gpu = accelerator_path(probs)
+    if gpu:
+        # bincount's size depends on the largest label (a host read).
+        total = torch.zeros(num_classes, dtype=torch.long,
+                            device=labels.device).index_add_(
+                                0, labels, torch.ones_like(labels)
+                                if mask is None else mask.long())
+    else:
+        total = torch.bincount(labels, minlength=num_classes)
     if classes == 'present':
         selected = total > 0
     elif classes == 'all':
@@ -56,12 +71,16 @@ def lovasz_softmax_flat(
     else:
         selected = torch.zeros_like(total, dtype=torch.bool)
         selected[list(classes)] = True
-    if not bool(selected.any()):
-        return None
-    columns = selected.nonzero()[:, 0]
-    coefficients = (_lovasz_coefficients_batched if accelerator_path(probs)
-                    else _lovasz_coefficients)
-    slopes, offsets = coefficients(probs.detach(), labels, total, columns)
+    if gpu:
+        columns = torch.arange(num_classes, device=probs.device)
+        slopes, offsets = _lovasz_coefficients_batched(
+            probs.detach(), labels, total, columns, mask)
+    else:
+        if not bool(selected.any()):
+            return None
+        columns = selected.nonzero()[:, 0]
+        slopes, offsets = _lovasz_coefficients(probs.detach(), labels,
+                                               total, columns)
     # Class c's loss, its sorted errors dotted with the Jaccard gradient,
     # is linear in the probabilities: sum_i g_i |[y_i = c] - p_ic| with
     # the g_i fixed by the order is sum_i slope_ic p_ic + offset_c. The
@@ -70,7 +89,10 @@ def lovasz_softmax_flat(
     if class_weight is not None:
         per_class = per_class * per_class.new_tensor(
             list(class_weight))[columns]
-    return per_class.mean()
+    if not gpu:
+        return per_class.mean()
+    kept = torch.where(selected, per_class, torch.zeros_like(per_class))
+    return kept.sum() / selected.sum().clamp(min=1)
 
 
 #: The signed int type of each float type's width (for sorting by bits).
@@ -142,8 +164,12 @@ def _lovasz_coefficients(probs: Tensor, labels: Tensor, total: Tensor,
 
 
 @torch.no_grad()
-def _lovasz_coefficients_batched(probs: Tensor, labels: Tensor, total: Tensor,
-                                 columns: Tensor) -> Tuple[Tensor, Tensor]:
+def _lovasz_coefficients_batched(
+        probs: Tensor,
+        labels: Tensor,
+        total: Tensor,
+        columns: Tensor,
+        mask: Optional[Tensor] = None) -> Tuple[Tensor, Tensor]:
     """:func:`_lovasz_coefficients` for all classes at once (the GPU path).
 
     One stable descending sort of every selected class's errors, then
@@ -152,12 +178,17 @@ def _lovasz_coefficients_batched(probs: Tensor, labels: Tensor, total: Tensor,
     a class (18 classes at 4 scales for OccCylindrical). Errors below a
     class's smallest member error come after its last member, where the
     Jaccard gradient is 0, so sorting them too changes nothing; ties keep
-    voxel order as in the loop. Same arguments and result.
+    voxel order as in the loop. Same arguments and result; the voxels
+    outside ``mask`` (if given) take the error -1, below every real one,
+    so they come after every member too, and a slope of 0.
     """
     num_voxels, num_classes = probs.shape
     errors = probs.t()[columns]  # (K, N)
     is_member = labels.unsqueeze(0) == columns.unsqueeze(1)
     errors = torch.where(is_member, 1.0 - errors, errors)
+    if mask is not None:
+        is_member = is_member & mask
+        errors = torch.where(mask, errors, -1.0)
     order = torch.sort(errors, dim=1, descending=True, stable=True)[1]
     hits = torch.gather(is_member, 1, order).to(probs.dtype)
     count = total[columns].to(probs.dtype).unsqueeze(1)
@@ -167,6 +198,8 @@ def _lovasz_coefficients_batched(probs: Tensor, labels: Tensor, total: Tensor,
     slopes = torch.zeros_like(probs.t())
     slopes[columns] = torch.zeros_like(errors).scatter(
         1, order, torch.where(hits.bool(), -grad, grad))
+    if mask is not None:
+        slopes = torch.where(mask, slopes, 0.0)
     offsets = probs.new_zeros(num_classes)
     offsets[columns] = (grad * hits).sum(1)
     return slopes.t().contiguous(), offsets
@@ -220,4 +253,4 @@ class OccLovaszLoss(OccupancyLossTerm):
         """Lovasz-softmax of the supervised voxels (unweighted); None when
         no class is selected."""
         return lovasz_softmax_flat(voxels.probs, voxels.labels, self.classes,
-                                   self.class_weight)
+                                   self.class_weight, voxels.mask)

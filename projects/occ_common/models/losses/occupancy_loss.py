@@ -12,6 +12,7 @@ import inspect
 import re
 from typing import Dict, List, Optional, Sequence, Union
 
+import torch
 import torch.nn as nn
 from mmdet3d.registry import MODELS
 from torch import Tensor
@@ -102,6 +103,11 @@ class OccupancyLossTerm(nn.Module):
         loss = None if voxels is None else self.loss_voxels(voxels)
         if loss is None:
             return zero_with_grad(logits)
+        if voxels.mask is not None:
+            # The GPU path cannot return early without supervised voxels
+            # (SupervisedVoxels): it gives the same connected zero.
+            loss = torch.where(voxels.mask.any(), loss,
+                               zero_with_grad(logits))
         return self.loss_weight * loss
 
     @float32_math

@@ -1,5 +1,5 @@
 """Scene-class affinity loss (MonoScene) with a configurable empty class."""
-from typing import Tuple
+from typing import Optional, Tuple, Union
 
 import torch
 from mmdet3d.registry import MODELS
@@ -100,11 +100,11 @@ class SceneClassAffinityLoss(OccupancyLossTerm):
     def loss_voxels(self, voxels: SupervisedVoxels) -> Tensor:
         """Scene-class affinity of the supervised voxels (unweighted)."""
         if self.mode == 'geo':
-            return self._geo(voxels.probs, voxels.labels)
-        return self._sem(voxels.probs, voxels.labels)
+            return self._geo(voxels.probs, voxels.labels, voxels.mask)
+        return self._sem(voxels.probs, voxels.labels, voxels.mask)
 
     def _terms(self, true_pos: Tensor, false_pos: Tensor, positives: Tensor,
-               num_voxels: int) -> Tensor:
+               num_voxels: Union[int, Tensor]) -> Tensor:
         """Precision, recall and specificity terms, summed, per column.
 
         From the sums over the voxels, for positive-class probabilities
@@ -117,7 +117,7 @@ class SceneClassAffinityLoss(OccupancyLossTerm):
             true_pos (Tensor): :math:`TP = \\sum p_i t_i`. Shape (K,).
             false_pos (Tensor): :math:`FP = \\sum p_i (1 - t_i)`. Shape (K,).
             positives (Tensor): :math:`\\sum t_i`. Shape (K,).
-            num_voxels (int): The number of voxels N.
+            num_voxels (int | Tensor): The number of voxels N.
 
         Returns:
             Tensor: One value per column. Shape (K,).
@@ -130,7 +130,8 @@ class SceneClassAffinityLoss(OccupancyLossTerm):
         return precision + recall + specificity
 
     @staticmethod
-    def _mass(probs: Tensor, labels: Tensor) -> Tuple[Tensor, Tensor]:
+    def _mass(probs: Tensor, labels: Tensor,
+              mask: Optional[Tensor] = None) -> Tuple[Tensor, Tensor]:
         """Each class's probability on its own voxels and on the others.
 
         One pass over the voxels: ``mass[y, c]`` sums :math:`p_{i,c}` over
@@ -141,45 +142,60 @@ class SceneClassAffinityLoss(OccupancyLossTerm):
         Args:
             probs (Tensor): Softmax probabilities. Shape (N, C).
             labels (Tensor): Labels in ``[0, C)``. Shape (N,).
+            mask (Tensor, optional): bool, the voxels that count (all by
+                default). Shape (N,).
 
         Returns:
             tuple[Tensor, Tensor]: ``own[c]`` (the sum over voxels of
             class c) and ``other[c]`` (over the other voxels). Shape (C,).
         """
         num_classes = probs.shape[1]
+        probs = probs.double()
+        if mask is not None:
+            probs = torch.where(mask[:, None], probs, 0.0)
         # float64: index_add sums one voxel at a time, and in float32 the
         # probabilities near 1 of ~3.6e5 empty voxels came out 1.3e-3 too
         # large (test_many_confident_voxels_keep_float32_precision).
-        mass = probs.new_zeros(
-            num_classes, num_classes, dtype=torch.float64).index_add(
-                0, labels, probs.double())
+        mass = probs.new_zeros(num_classes, num_classes).index_add(
+            0, labels, probs)
         off_diagonal = 1.0 - torch.eye(
             num_classes, dtype=mass.dtype, device=probs.device)
         return mass.diagonal(), (mass * off_diagonal).sum(0)
 
-    def _geo(self, probs: Tensor, labels: Tensor) -> Tensor:
-        """Geometric term: occupied (:math:`1 - p_{empty}`) vs empty."""
+    def _geo(self, probs: Tensor, labels: Tensor,
+             mask: Optional[Tensor] = None) -> Tensor:
+        """Geometric term: occupied (:math:`1 - p_{empty}`) vs empty, over
+        the voxels of ``mask`` (all by default)."""
         occupied_prob = 1.0 - probs[:, self.empty_index]
         occupied = labels != self.empty_index
+        empty = ~occupied
+        num_voxels = labels.numel()
+        if mask is not None:
+            occupied, empty = occupied & mask, empty & mask
+            num_voxels = mask.sum()
         zero = occupied_prob.new_zeros(())
         true_pos = torch.where(occupied, occupied_prob, zero).sum()
-        false_pos = torch.where(occupied, zero, occupied_prob).sum()
+        false_pos = torch.where(empty, occupied_prob, zero).sum()
         positives = occupied.sum().to(probs.dtype)
-        return self._terms(true_pos, false_pos, positives, labels.numel())
+        return self._terms(true_pos, false_pos, positives, num_voxels)
 
-    def _sem(self, probs: Tensor, labels: Tensor) -> Tensor:
-        """Semantic term: mean over the classes present in the target."""
-        own, other = self._mass(probs, labels)
+    def _sem(self, probs: Tensor, labels: Tensor,
+             mask: Optional[Tensor] = None) -> Tensor:
+        """Semantic term: mean over the classes present in the target, over
+        the voxels of ``mask`` (all by default; the GPU path's)."""
+        own, other = self._mass(probs, labels, mask)
         if accelerator_path(labels):
             # No host reads (bincount's maximum, three boolean indexes):
             # every class's terms, absent ones masked out of the mean.
-            counts = torch.zeros(probs.shape[1], dtype=torch.long,
-                                 device=labels.device).index_add_(
-                                     0, labels, torch.ones_like(labels))
+            counts = torch.zeros(
+                probs.shape[1], dtype=torch.long,
+                device=labels.device).index_add_(
+                    0, labels, torch.ones_like(labels)
+                    if mask is None else mask.long())
             present = counts > 0
-            terms = self._terms(own, other,
-                                counts.clamp(min=1).to(own.dtype),
-                                labels.numel())
+            terms = self._terms(
+                own, other, counts.clamp(min=1).to(own.dtype),
+                labels.numel() if mask is None else mask.sum())
             kept = torch.where(present, terms, torch.zeros_like(terms))
             num_present = present.sum().clamp(min=1).to(terms.dtype)
             return (kept.sum() / num_present).to(probs.dtype)

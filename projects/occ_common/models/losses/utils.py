@@ -96,17 +96,43 @@ class SupervisedVoxels:
     shared, so four terms on a 200 x 200 x 16 grid cost one selection and
     one softmax (and their backward passes), not four.
 
+    The CPU's code path selects the M supervised voxels. On GPUs (and in
+    compiled code, :mod:`projects.occ_common.utils.device_path`) selecting
+    them would read M on the host (a sync, and a graph break under
+    ``torch.compile``), so every voxel is kept and ``mask`` says which are
+    supervised; the terms leave the others out of every sum (their labels
+    read 0, a valid class index).
+
     Args:
-        scores (Tensor): float32 logits of the supervised voxels. Shape
-            (M, C).
+        scores (Tensor): float32 logits of the supervised voxels (of every
+            voxel, with ``mask``). Shape (M, C).
         labels (Tensor): Their labels in ``[0, C)``. Shape (M,).
+        mask (Tensor, optional): bool, which voxels are supervised.
+            Defaults to None (all). Shape (M,).
     """
 
-    def __init__(self, scores: Tensor, labels: Tensor) -> None:
+    def __init__(self, scores: Tensor, labels: Tensor,
+                 mask: Optional[Tensor] = None) -> None:
         self.scores = scores
         self.labels = labels
+        self.mask = mask
         self._log_probs: Optional[Tensor] = None
         self._probs: Optional[Tensor] = None
+
+    def only(self, values: Tensor) -> Tensor:
+        """``values`` (M, ...) with 0 at the voxels that are not supervised
+        (no gradient reaches them)."""
+        if self.mask is None:
+            return values
+        mask = self.mask.view(-1, *([1] * (values.dim() - 1)))
+        return torch.where(mask, values, torch.zeros_like(values))
+
+    def mean(self, values: Tensor) -> Tensor:
+        """Mean of per-voxel ``values`` (M,) over the supervised voxels (0
+        when there are none)."""
+        if self.mask is None:
+            return values.mean()
+        return self.only(values).sum() / self.mask.sum().clamp(min=1)
 
     @property
     def log_probs(self) -> Tensor:
@@ -142,11 +168,17 @@ def supervised_voxels(logits: Tensor, target: Tensor, ignore_index: int,
 
     Returns:
         SupervisedVoxels | None: The M supervised voxels, or None when
-        M = 0.
+        M = 0; on the GPU path every voxel and the mask of the supervised
+        ones (see :class:`SupervisedVoxels`), whatever M.
     """
     flat_logits, flat_target = flatten_logits(logits, target, loss_name)
     valid = check_labels(flat_target, flat_logits.shape[1], ignore_index,
                          loss_name)
+    if accelerator_path(flat_target):
+        return SupervisedVoxels(
+            flat_logits.float(),
+            torch.where(valid, flat_target, torch.zeros_like(flat_target)),
+            valid)
     # One host read (the count, from nonzero), not three (any() and two
     # boolean indexes).
     rows = valid.nonzero().squeeze(1)

@@ -15,6 +15,7 @@ from mmdet3d.registry import MODELS
 from mmengine.model import BaseModule
 from torch import Tensor, nn
 
+from ...utils.eager_island import eager_island
 from ..layers.checkpointing import checkpoint_if_grad
 from .backend import check_backend
 from .dense import scatter_bev, to_dense_bev
@@ -319,6 +320,10 @@ class SPVCNNEncoder(BaseModule):
         mask[flat] = True
         return mask.view(batch_size, 1, height, width)
 
+    # Every layer's size is the data's (voxels, rulebook pairs): under
+    # torch.compile the encoder runs eagerly, one graph break, instead of
+    # breaking at each of them and compiling again for every point count.
+    @eager_island(dynamic_dim=None)
     def forward(self, points: Sequence[Tensor]) -> Dict[str, Tensor]:
         """Encode a batch of point clouds into BEV features.
 

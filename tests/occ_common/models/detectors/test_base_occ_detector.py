@@ -127,3 +127,28 @@ def test_missing_fields_are_named():
     wrong = make_occ_batch(occ_shape=(4, 4, 4))[1]
     with pytest.raises(ValueError, match='does not match the grid'):
         det.occupancy_targets(wrong, torch.device('cpu'))
+
+
+def test_seg_loss_counts_non_ignored_labels_without_a_host_read(
+        monkeypatch):
+    """mmdet's CrossEntropyLoss(avg_non_ignore=True) counts the labels it
+    does not ignore with ``.item()`` (a sync; a graph break under
+    torch.compile); the detector gives it that count as ``avg_factor``
+    instead. Four pixels, two classes, logits 0 (CE ln 2 each), one label
+    ignored: the mean over the other three is ln 2 = 0.6931472 (over all
+    four it would be 0.75 ln 2), and Dynamo traces it in one graph."""
+    from projects.occ_common.analysis.compile_check import explain_breaks
+    det = _Detector(loss_seg=dict(
+        type='mmdet.CrossEntropyLoss', ignore_index=255,
+        avg_non_ignore=True))
+    monkeypatch.setattr(det, 'seg_targets',
+                        lambda *args: torch.tensor([[[0, 1], [255, 1]]]))
+    logits = torch.zeros(1, 2, 2, 2)
+
+    def loss(seg_logits):
+        return det.seg_losses({'seg_logits': seg_logits}, [], None,
+                              1)['loss_seg']
+
+    assert loss(logits).item() == pytest.approx(0.6931472, abs=1e-6)
+    report = explain_breaks(loss, logits)
+    assert (report.graphs, report.breaks) == (1, [])

@@ -11,7 +11,7 @@ from projects.occ_common.synthetic.occ_inputs import (PATCH_DEPTH_BOUND,
 BOUND = PATCH_DEPTH_BOUND  # 4 bins of 1 m from 1 m
 
 
-def test_depth_loss_hand_computed():
+def test_depth_loss_hand_computed(code_path):
     """Two pixels with a target, BCE summed over bins, mean over pixels.
 
     pixel (0, 0): target bin 1, pred (0.25, 0.25, 0.25, 0.25)
@@ -36,7 +36,7 @@ def test_depth_loss_hand_computed():
     assert torch.equal(pred.grad[0, :, 0, 1], torch.zeros(4))
 
 
-def test_nearest_bin_changes_the_target_the_loss_pulls_to():
+def test_nearest_bin_changes_the_target_the_loss_pulls_to(code_path):
     """One pixel at 2.6 m, bins lifted at 1, 2, 3, 4 m, prediction (0.1,
     0.1, 0.7, 0.1). floor: bin 1 (2 m), BCE -2 ln 0.9 - ln 0.1 - ln 0.3 =
     0.2107210 + 2.3025851 + 1.2039728 = 3.7172789; nearest_bin: bin 2 (3
@@ -61,7 +61,7 @@ def test_nearest_bin_changes_the_target_the_loss_pulls_to():
 
 
 @pytest.mark.parametrize('bad', [float('nan'), float('inf')])
-def test_non_finite_prediction_gives_nan_not_a_crash(bad):
+def test_non_finite_prediction_gives_nan_not_a_crash(bad, code_path):
     """A diverged depth net: BCE raised "all elements of input should be
     between 0 and 1"; now the loss is NaN (for NonFiniteLossHook to name)
     and backward stays finite. A bad value at a pixel without a target
@@ -80,7 +80,7 @@ def test_non_finite_prediction_gives_nan_not_a_crash(bad):
     assert torch.isfinite(pred.grad).all()
 
 
-def test_no_lidar_is_finite_zero():
+def test_no_lidar_is_finite_zero(code_path):
     """No LiDAR return anywhere: 0 with zero gradients."""
     pred = torch.full((2, 4, 2, 2), 0.25, requires_grad=True)
     loss = DepthBCELoss(

@@ -18,7 +18,7 @@ def _two_voxels():
     return logits, target
 
 
-def test_focal_hand_computed():
+def test_focal_hand_computed(code_path):
     """Two supervised voxels, one ignored, gamma = 2.
 
     voxel 0: p_t = 3 / (3 + 1) = 0.75 -> (1 - 0.75)^2 * -ln 0.75
@@ -37,7 +37,7 @@ def test_focal_hand_computed():
     assert torch.equal(logits.grad[2], torch.zeros(2))
 
 
-def test_focal_class_weight_and_loss_weight():
+def test_focal_class_weight_and_loss_weight(code_path):
     """class_weight = (2, 1), loss_weight = 0.5.
 
     (2 * 0.0179801 + 1 * 0.1732868) / 2 = 0.1046235; * 0.5 = 0.0523117.
@@ -52,7 +52,7 @@ def test_focal_class_weight_and_loss_weight():
     assert loss.item() == pytest.approx(0.0523117, abs=1e-6)
 
 
-def test_focal_5d_matches_flat_and_keeps_inputs():
+def test_focal_5d_matches_flat_and_keeps_inputs(code_path):
     """(B, C, X, Y, Z) = (1, 2, 3, 1, 1) holds the same three voxels.
 
     The loss equals the flat case (0.0956335) and neither input changes:
@@ -71,7 +71,7 @@ def test_focal_5d_matches_flat_and_keeps_inputs():
     assert torch.equal(logits.grad[0, :, 2], torch.zeros(2, 1, 1))
 
 
-def test_focal_gamma_zero_gradient_is_cross_entropy():
+def test_focal_gamma_zero_gradient_is_cross_entropy(code_path):
     """gamma = 0 is the cross-entropy; d/dlogits = (p - onehot) / N.
 
     voxel 1 (p = (0.5, 0.5), label 1): grad = (0.5 - 0, 0.5 - 1) / 2
@@ -87,7 +87,7 @@ def test_focal_gamma_zero_gradient_is_cross_entropy():
     assert torch.allclose(logits.grad, expected, atol=1e-6)
 
 
-def test_focal_all_ignored_is_finite_zero():
+def test_focal_all_ignored_is_finite_zero(code_path):
     """Every voxel ignored: the loss is 0 and every gradient 0."""
     logits = torch.randn(2, 3, 2, 2, 1, requires_grad=True)
     target = torch.full((2, 2, 2, 1), 255)

@@ -20,7 +20,7 @@ def _voxels_5d(labels):
     return logits, torch.tensor(labels).reshape(1, 3, 1, 1)
 
 
-def test_lovasz_hand_computed_present():
+def test_lovasz_hand_computed_present(code_path):
     """Voxel a: label 0, p = (0.75, 0.25); b: label 1, p = (0.5, 0.5).
 
     class 0: fg = (1, 0), errors |fg - p0| = (0.25, 0.5); sorted (b, a).
@@ -41,7 +41,7 @@ def test_lovasz_hand_computed_present():
     assert torch.equal(target[0, 2], torch.tensor([[255]]))
 
 
-def test_lovasz_class_selection_and_weight():
+def test_lovasz_class_selection_and_weight(code_path):
     """Same voxels. classes=[1] -> 0.5; class_weight (1, 2) -> (0.375 +
     2 * 0.5) / 2 = 0.6875; loss_weight 2 doubles 0.4375 to 0.875."""
     logits, target = _voxels_5d([0, 1, 255])
@@ -53,7 +53,7 @@ def test_lovasz_class_selection_and_weight():
         pytest.approx(0.875, abs=1e-6)
 
 
-def test_lovasz_all_includes_absent_class():
+def test_lovasz_all_includes_absent_class(code_path):
     """Both voxels labelled 0.
 
     class 0: fg = (1, 1), errors (0.25, 0.5), sorted (0.5, 0.25); gts = 2:
@@ -69,7 +69,7 @@ def test_lovasz_all_includes_absent_class():
         pytest.approx(0.4375, abs=1e-6)
 
 
-def test_lovasz_single_supervised_voxel():
+def test_lovasz_single_supervised_voxel(code_path):
     """One voxel (label 1, p = (0.5, 0.5)): class 1, error 0.5, J_1 = 1
     -> 0.5. mmdet3d's LovaszLoss loses the class axis in this case."""
     logits, target = _voxels_5d([255, 1, 255])
@@ -79,7 +79,7 @@ def test_lovasz_single_supervised_voxel():
     assert torch.isfinite(logits.grad).all()
 
 
-def test_lovasz_all_ignored_is_finite_zero():
+def test_lovasz_all_ignored_is_finite_zero(code_path):
     """Every voxel ignored: 0 and zero gradients."""
     logits, target = _voxels_5d([255, 255, 255])
     loss = OccLovaszLoss()(logits, target)
@@ -88,7 +88,7 @@ def test_lovasz_all_ignored_is_finite_zero():
     assert torch.equal(logits.grad, torch.zeros_like(logits))
 
 
-def test_lovasz_matches_mmdet3d_on_4d_input():
+def test_lovasz_matches_mmdet3d_on_4d_input(code_path):
     """Where mmdet3d's LovaszLoss works (4-D logits, >= 2 supervised
     voxels) it gives the same 0.4375; on 5-D logits it raises, which is
     why this module exists."""

@@ -6,7 +6,8 @@ import pytest
 import torch
 
 from projects.occ_common.models.losses import (MultiScaleOccupancyLoss,
-                                               OccFocalLoss, OccupancyLoss,
+                                               OccFocalLoss, OccLovaszLoss,
+                                               OccupancyLoss,
                                                SceneClassAffinityLoss,
                                                downsample_occupancy_gt,
                                                term_name)
@@ -239,3 +240,41 @@ def test_terms_share_one_selection_and_softmax(monkeypatch, code_path):
     (ref0, ref1) = torch.autograd.grad(sum(alone.values()), scales)
     torch.testing.assert_close(grad0, ref0)
     torch.testing.assert_close(grad1, ref1)
+
+
+@pytest.mark.parametrize('ignored', [0.3, 1.0])
+def test_gpu_path_masks_what_the_cpu_path_selects(ignored):
+    """The GPU path (and compiled code) keeps every voxel and masks the
+    ignored ones out of each term instead of selecting the supervised ones
+    (a host read of their number): the four terms of OccCylindrical's
+    config, Lovasz over the present and over all classes, give the CPU
+    path's values and gradients with 30 % of the voxels ignored, and the
+    same zeros with all of them ignored."""
+    from projects.occ_common.utils.device_path import forced_accelerator_path
+    gen = torch.Generator().manual_seed(7)
+    logits = torch.randn(2, 5, 4, 4, 2, generator=gen)
+    gt = torch.randint(0, 4, (2, 4, 4, 2), generator=gen)  # class 4 absent
+    gt[torch.rand(gt.shape, generator=gen) < ignored] = IGN
+    every_class = OccLovaszLoss(classes='all', loss_weight=0.5)
+    every_class.loss_name = 'loss_lovasz_all'
+    loss = OccupancyLoss([
+        dict(type='OccFocalLoss'),
+        dict(type='OccLovaszLoss'), every_class,
+        dict(type='SceneClassAffinityLoss', mode='geo'),
+        dict(type='SceneClassAffinityLoss', mode='sem')
+    ])
+    results = []
+    for gpu in (False, True):
+        with forced_accelerator_path(gpu):
+            x = logits.clone().requires_grad_()
+            terms = loss(x, gt)
+            grad, = torch.autograd.grad(sum(terms.values()), x)
+        results.append((terms, grad))
+    (cpu, cpu_grad), (gpu, gpu_grad) = results
+    assert list(cpu) == list(gpu)
+    for key in cpu:
+        torch.testing.assert_close(gpu[key], cpu[key], rtol=1e-5, atol=1e-6)
+    torch.testing.assert_close(gpu_grad, cpu_grad, rtol=1e-5, atol=1e-6)
+    if ignored == 1.0:
+        assert all(float(v.detach()) == 0 for v in gpu.values())
+        assert not gpu_grad.any()

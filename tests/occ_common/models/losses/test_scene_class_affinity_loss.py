@@ -44,7 +44,7 @@ def test_sem_hand_computed(code_path):
     assert torch.equal(logits.grad[0, :, 3], torch.zeros(3, 1, 1))
 
 
-def test_geo_hand_computed_empty_first():
+def test_geo_hand_computed_empty_first(code_path):
     """empty_index = 0 (SurroundOcc): occupied prob = 1 - p0.
 
     p_occ = (0.75, 0.5, 0.75), t = (1, 0, 1)
@@ -59,7 +59,7 @@ def test_geo_hand_computed_empty_first():
     assert torch.isfinite(logits.grad).all()
 
 
-def test_geo_hand_computed_empty_last():
+def test_geo_hand_computed_empty_last(code_path):
     """empty_index = 2 (Occ3D-style free last): p_occ = 1 - p2 = 0.75 each.
 
     t = (1, 1, 1) (no voxel is label 2): P = 2.25 / 2.25 = 1,
@@ -71,7 +71,7 @@ def test_geo_hand_computed_empty_last():
     assert loss.item() == pytest.approx(math.log(4 / 3), abs=1e-4)
 
 
-def test_geo_all_empty_batch_is_finite():
+def test_geo_all_empty_batch_is_finite(code_path):
     """Two empty voxels, logits 0 (p = 0.5): MonoScene's recall is 0 / 0.
 
     P: (0 + eps) / (1.0 + eps) -> ln((1 + eps) / eps) = 11.5129355
