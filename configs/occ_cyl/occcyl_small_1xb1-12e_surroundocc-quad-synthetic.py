@@ -1,5 +1,4 @@
-# The small OccCylindrical (occcyl_small_*) on the synthetic four-camera rig
-# whose LiDAR has no ring index (docs/customize_dataset.md).
+# Small OccCylindrical, synthetic 4-camera rig, no ring: customize_dataset.md
 _base_ = ['./_base_/occcyl_small_nus-synthetic.py',
           '../_base_/datasets/surroundocc-task.py',
           '../_base_/cpu_smoke_runtime.py']

@@ -1,5 +1,4 @@
-# The tiny SDG-Fusion on the synthetic four-camera rig whose LiDAR has no
-# ring index (docs/customize_dataset.md).
+# Tiny SDG-Fusion, synthetic 4-camera rig, no ring: customize_dataset.md
 _base_ = ['./_base_/sdgocc-fusion_tiny_occ3d-nus-synthetic.py',
           '../_base_/cpu_smoke_runtime.py']
 

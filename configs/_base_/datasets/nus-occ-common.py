@@ -19,8 +19,7 @@ backend_args = None
 # margin (projects/occ_common/transforms/ego_points.py): its own returns (a
 # quarter of a key frame, in voxels labelled empty) go from every sweep.
 ego_box = [-0.9, -1.1, -0.5, 3.7, 1.1, 2.2]
-# Points carry x, y, z, intensity (load_dim=None: the info file's values
-# per point, nuScenes' 5 or 4 without ring index), then the time lag.
+# x, y, z, intensity of the info file's point layout, then the time lag.
 _key_frame = dict(type='LoadOccPointsFromFile', coord_type='LIDAR',
                   load_dim=None, use_dim=4, backend_args=backend_args)
 _remove_ego = dict(type='RemoveEgoPoints', ego_box=ego_box)
