@@ -49,8 +49,7 @@ COUPLED = {
 }
 KL_KEYS = {
     'loss_distill.type', 'loss_distill.alpha',
-    'loss_distill.beta', 'loss_distill.loss_weight', 'teacher_loss_weight',
-    'separate_teacher_head'
+    'loss_distill.beta', 'loss_distill.loss_weight', 'kl_losses'
 }
 #: Table 3's rows without the SDG lift also drop its semantic head.
 NO_SDG_KEYS = {'view_transform.use_sdg', 'depth_net.seg_channels', 'loss_seg'}
