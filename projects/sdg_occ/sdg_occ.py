@@ -49,6 +49,8 @@ from mmdet3d.registry import MODELS
 from torch import Tensor, nn
 
 from projects.occ_common.models.detectors import BaseOccDetector
+from projects.occ_common.models.sparse.point_seg_head import \
+    gather_point_labels
 from .temporal_fusion import (FrameBEVCache, TemporalBEVFusion, frame_points,
                               frame_samples)
 
@@ -128,6 +130,11 @@ class SDGOcc(BaseOccDetector):
             BEV's width. Defaults to None.
         loss_distill (dict, optional): ``FOADDistillLoss``: makes the model
             SDG-KL. Defaults to None.
+        point_seg_head (dict, optional): ``PointSegHead`` on the LiDAR
+            encoder's point features, trained with the lidarseg labels
+            (``loss_point_seg``), as the authors' release trains its SPVCNN
+            (not in the paper); needs a ``lidar_encoder`` and the points'
+            labels. Defaults to None.
         loss_depth (dict, optional): ``DepthBCELoss``. Defaults to None.
         loss_seg (dict, optional): 2D semantic loss on (N, C) logits, e.g.
             ``mmdet.CrossEntropyLoss`` with ``ignore_index=255``.
@@ -198,6 +205,7 @@ class SDGOcc(BaseOccDetector):
                  lidar_encoder: Optional[dict] = None,
                  fusion: Optional[dict] = None,
                  loss_distill: Optional[dict] = None,
+                 point_seg_head: Optional[dict] = None,
                  loss_depth: Optional[dict] = None,
                  loss_seg: Optional[dict] = None,
                  kl_losses: str = 'three_loss',
@@ -282,6 +290,16 @@ class SDGOcc(BaseOccDetector):
             self.teacher_occ_head = self.build_child(
                 occ_head, dz=self.occ_shape[2], **self.head_defaults())
         self.lidar_encoder = self.build_child(lidar_encoder, **grid)
+        self.point_seg_head = None
+        if point_seg_head:
+            if self.lidar_encoder is None:
+                raise ValueError('SDGOcc: point_seg_head reads the LiDAR '
+                                 "encoder's point features; set a "
+                                 'lidar_encoder or point_seg_head=None')
+            self.point_seg_head = MODELS.build(
+                point_seg_head,
+                default_args=dict(
+                    in_channels=self.lidar_encoder.point_channels))
         self.fusion = None
         if fusion:
             self.fusion = self.build_child(
@@ -595,7 +613,7 @@ class SDGOcc(BaseOccDetector):
             dict[str, Tensor]: Occupancy losses (for SDG-KL: of the fused
             BEV with ``kl_losses='paper'``, of the camera BEV plus
             ``*_teacher`` with ``'three_loss'``), ``loss_distill`` for
-            SDG-KL, ``loss_depth``, ``loss_seg``.
+            SDG-KL, ``loss_depth``, ``loss_seg``, ``loss_point_seg``.
         """
         device = inputs['imgs'].device
         depth_out, cam = self.extract_camera_bev(inputs, data_samples)
@@ -606,6 +624,11 @@ class SDGOcc(BaseOccDetector):
                 self.occ_head.loss(self.bev_encoder(cam['bev']), gt_occ))
             return losses
         lidar = self.extract_lidar_bev(inputs)
+        if self.point_seg_head is not None:
+            labels = gather_point_labels(data_samples, inputs['points'])
+            losses.update(
+                self.point_seg_head.loss(lidar['point_feats'],
+                                         labels[lidar['point_index']]))
         if self.detach_teacher_camera:  # 'kl' only (checked at build)
             fused = self.fuse(lidar, dict(cam, bev=cam['bev'].detach()))
         else:

@@ -88,10 +88,11 @@ DELTAS = {
     'sdgocc-camera-lss': (FUSION, CAMERA_KEYS | NO_SDG_KEYS),
     'sdgocc-camera-sdg': (FUSION, CAMERA_KEYS),
     'sdgocc-fusion-lss': (FUSION, NO_SDG_KEYS),
-    # ... and its camera rows and SDG-KL over two frames: the same deltas
-    # on the two-frame SDG-Fusion.
+    # ... and its rows and SDG-KL over two frames: the same deltas on the
+    # two-frame SDG-Fusion.
     'sdgocc-camera-lss-2f': (FUSION_2F, CAMERA_KEYS | NO_SDG_KEYS),
     'sdgocc-camera-sdg-2f': (FUSION_2F, CAMERA_KEYS),
+    'sdgocc-fusion-lss-2f': (FUSION_2F, NO_SDG_KEYS),
     _main('kl-2f', 'occ3d-nus'): (FUSION_2F, KL_KEYS),
 }
 
@@ -103,18 +104,19 @@ def _name(path):
 def test_config_inventory():
     """Both variants on both datasets, as tiny and small synthetic configs,
     and the deltas of Tables 3 (3 files, and the two camera rows over two
-    frames; SDG + FOAD is the main fusion config), 4 (6) and 5 (4)."""
+    frames, and the three of them over two frames; SDG + FOAD is the main
+    fusion config), 4 (6) and 5 (4)."""
     names = {osp.basename(p) for p in MAIN}
     for variant in ('fusion', 'kl'):
         for dataset in ('occ3d-nus', 'surroundocc-nus'):
             assert osp.basename(_main(variant, dataset)) in names
         assert osp.basename(_tiny(variant)) in names
         assert osp.basename(_small(variant)) in names
-    assert len(ABLATIONS) == 15
+    assert len(ABLATIONS) == 16
     table3 = sorted(_name(p) for p in ABLATIONS if _name(p) in DELTAS)
     assert table3 == [
         'sdgocc-camera-lss', 'sdgocc-camera-lss-2f', 'sdgocc-camera-sdg',
-        'sdgocc-camera-sdg-2f', 'sdgocc-fusion-lss'
+        'sdgocc-camera-sdg-2f', 'sdgocc-fusion-lss', 'sdgocc-fusion-lss-2f'
     ]
 
 

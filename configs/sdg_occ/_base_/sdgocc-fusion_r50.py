@@ -40,10 +40,18 @@ model = dict(
         # (tools/analysis_tools/benchmark.py --train --synthetic-batch).
         with_cp=True, init_cfg=None),  # weights: `pretrained` below
     # ImageNet weights, as BEVDet-Occ, loaded and checked without torchvision
-    # (docs/train_test.md); checkpoint=None trains from scratch.
-    pretrained=dict(img_backbone=dict(
-        module='img_backbone', checkpoint='torchvision://resnet50',
-        style='pytorch', ignore=[r'^fc\.'])),  # the ImageNet classifier
+    # (docs/train_test.md); checkpoint=None trains from scratch. The release
+    # instead starts the camera side from BEVDet (`bevdet_pretrained` below)
+    # and SPVCNN from a lidarseg pre-training (its best_iou_635_4.pth):
+    # train ../spvcnn_4xb4-24e_nus-lidarseg.py and set lidar_encoder's
+    # checkpoint to its file. None: neither checkpoint is published.
+    pretrained=dict(
+        img_backbone=dict(
+            module='img_backbone', checkpoint='torchvision://resnet50',
+            style='pytorch', ignore=[r'^fc\.']),  # the ImageNet classifier
+        lidar_encoder=dict(module='lidar_encoder', checkpoint=None,
+                           prefix='lidar_encoder.',
+                           allow_missing=[r'^bev_proj\.'])),
     # The FPN over the 1/16 and 1/32 stages, "down-sampled to 1/16"
     # (Sec. 3.3): mmdet's FPN without the 1/32 output convolution, which
     # nothing reads and whose unused weights DDP refuses.
@@ -76,9 +84,9 @@ model = dict(
         type='NeighborhoodFusion',
         # The widths come from the detector: camera BEV queries, LiDAR BEV
         # keys / values for SDG-Fusion (swapped for SDG-KL's teacher).
-        # Attention width (not given by the paper): the camera BEV's 64
-        # channels in 4 heads of 16, NAT's head width.
-        embed_dims=64, num_heads=4,
+        # Not in the paper: the release's three attention layers, 256 wide
+        # in 8 heads (its NATBlock(dim=256, depth=3, num_heads=8)).
+        embed_dims=256, num_heads=8, num_layers=3,
         kernel_size=7),  # neighbourhood k = 7 (paper, Table 5)
     bev_encoder=dict(
         type='SDGBEVEncoder', in_channels=_cam_channels,
@@ -95,6 +103,10 @@ model = dict(
         # add OccLovaszLoss / SceneClassAffinityLoss entries to use them.
         loss_occ=dict(type='OccupancyLoss', losses=[
             dict(type='OccFocalLoss', gamma=0.0, loss_weight=1.0)])),
+    # Not in the paper: the release's point segmentation loss on SPVCNN
+    # (lidarseg labels, x0.1; it adds Lovasz); needs nuScenes-lidarseg.
+    point_seg_head=dict(type='PointSegHead', num_classes=_num_seg_classes,
+                        loss_weight=0.1),
     # The paper gives neither loss weight; 0.05 (depth) is the authors'
     # partial release's (BEVDet-Occ's), 0.5 (2D semantics) the release's.
     loss_depth=dict(type='DepthBCELoss', downsample=_img_stride,
@@ -103,11 +115,13 @@ model = dict(
                   avg_non_ignore=True, loss_weight=0.5))
 
 # Depth bins per label grid (min, max, step in metres; not given by the
-# paper), which the dataset configs merge into `model`: on Occ3D those of
-# BEVDet-Occ / FlashOcc, which SDG-OCC builds on, 1..45 m at 0.5 m (88
-# bins); on SurroundOcc BEVDet's nuScenes 1..60 m at 0.5 m (118 bins),
-# which covers the 50 m grid along every camera axis.
-depth_bounds = dict(occ3d=[1.0, 45.0, 0.5], surroundocc=[1.0, 60.0, 0.5])
+# paper), which the dataset configs merge into `model`: on Occ3D the
+# release's 1..45 m at 0.5 m (88 bins, as BEVDet-Occ / FlashOcc); on
+# SurroundOcc BEVDet's nuScenes 1..60 m (118 bins), covering the 50 m grid
+# along every camera axis. 'sid': log-spaced as the release's `sid=True`
+# (projects/occ_common/geometry/depth.py), finer near the car.
+depth_bounds = dict(occ3d=[1.0, 45.0, 0.5, 'sid'],
+                    surroundocc=[1.0, 60.0, 0.5, 'sid'])
 
 # SDG-KL: SDG-Fusion's network trained with a LiDAR-dominant fusion (LiDAR
 # queries, camera keys / values; the detector swaps the widths) as a teacher
@@ -130,15 +144,31 @@ kl_model = dict(
     # 2026-11-28: the camera BEV's own occupancy loss, the teacher's
     # through its own head, and FOAD.
     kl_losses='paper')
-# SDG-OCC Table 3's camera rows (ablations/sdgocc-camera-*): no LiDAR
-# encoder, no fusion. "+SDG" keeps the SDG lift (LiDAR points still guide
-# it); the Baseline is the plain LSS lift, without which nothing uses the
-# 2D semantics, so no semantic head or loss_seg (FlashOcc has none); depth
-# supervision stays (FlashOcc's BEVDepth-style DepthNet has it).
-camera_sdg_model = dict(lidar_encoder=None, fusion=None)
-camera_lss_model = dict(
-    camera_sdg_model, view_transform=dict(use_sdg=False),
-    depth_net=dict(seg_channels=0), loss_seg=None)
+# SDG-OCC Table 3's rows without SDG (ablations/sdgocc-*-lss*): the plain
+# LSS lift, without which nothing uses the 2D semantics, so no semantic head
+# or loss_seg (FlashOcc has none); depth supervision stays (FlashOcc's
+# BEVDepth-style DepthNet has it). The camera rows (ablations/sdgocc-camera-*)
+# have no LiDAR encoder, no fusion; "+SDG" keeps the SDG lift (LiDAR points
+# still guide it).
+lss_lift_model = dict(view_transform=dict(use_sdg=False),
+                      depth_net=dict(seg_channels=0), loss_seg=None)
+camera_sdg_model = dict(lidar_encoder=None, fusion=None, point_seg_head=None,
+                        pretrained=dict(lidar_encoder=None))
+camera_lss_model = dict(camera_sdg_model, **lss_lift_model)
+# The release's camera start (its load_from, BEVDet-R50-CBGS): the ResNet,
+# the FPN and the BEV encoder's residual blocks (renamed); BEVDet's 3x3
+# shortcut convs and FPN-LSS have no counterpart here. Not the default: the
+# file has no URL. Use: model = dict(pretrained=bevdet_pretrained).
+_bevdet = 'checkpoints/bevdet-r50-cbgs.pth'
+bevdet_pretrained = dict(
+    img_backbone=dict(module='img_backbone', checkpoint=_bevdet,
+                      prefix='img_backbone.', style='pytorch'),
+    img_neck=dict(module='img_neck', checkpoint=_bevdet, prefix='img_neck.'),
+    bev_encoder=dict(
+        module='bev_encoder', checkpoint=_bevdet,
+        prefix='img_bev_encoder_backbone.', key_map=[(r'^layers\.', 'stages.')],
+        ignore=[r'\.downsample\.'],
+        allow_missing=[r'\.shortcut\.', r'^merges\.', r'^out\.']))
 
 # Schedule: AdamW lr 1e-4 with gradient clipping (paper); weight decay, clip
 # norm, warm-up and 24 epochs follow BEVDet-Occ / FlashOcc; 4 GPUs x 2 samples

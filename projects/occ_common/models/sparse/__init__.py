@@ -19,11 +19,13 @@ from .sparse_conv import (SparseConv, SparseConvBase, SparseInverseConv,
 from .sparse_norm_act import (LinearBNReLU, SparseBatchNorm, SparseReLU,
                               batch_norm_rows)
 from .sparse_tensor import SparseTensor
+from .point_seg_head import PointSegHead
 from .spvcnn_encoder import SPVCNNEncoder
 from .torch_backend import rulebook_conv
 
 __all__ = [
-    'BACKENDS', 'CoordIndex', 'LinearBNReLU', 'Rulebook', 'SPVCNNEncoder',
+    'BACKENDS', 'CoordIndex', 'LinearBNReLU', 'PointSegHead', 'Rulebook',
+    'SPVCNNEncoder',
     'TrilinearPlan', 'devoxelize', 'trilinear_plan',
     'SparseBatchNorm', 'SparseConv', 'SparseConvBNReLU', 'SparseConvBase',
     'SparseInverseConv', 'SparseReLU', 'SparseResBlock', 'SparseTensor',
