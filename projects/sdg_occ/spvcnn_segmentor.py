@@ -7,8 +7,8 @@ occupancy model. :class:`SPVCNNSegmentor` is that pre-training: the
 SDG-OCC configs' ``SPVCNNEncoder`` without its BEV projection and a
 :class:`~projects.occ_common.models.sparse.PointSegHead`; its checkpoint
 loads into the occupancy model's ``lidar_encoder`` through the checked
-``pretrained`` entry (``configs/sdg_occ/sdgocc-spvcnn_4xb4-24e_nus-lidarseg
-.py``).
+``pretrained`` entry
+(``configs/sdg_occ/pretrain/spvcnn_4xb4-24e_nus-lidarseg.py``).
 """
 from typing import Dict, List, Optional, Sequence
 

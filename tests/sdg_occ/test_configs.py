@@ -53,8 +53,11 @@ KL_KEYS = {
 }
 #: Table 3's rows without the SDG lift also drop its semantic head.
 NO_SDG_KEYS = {'view_transform.use_sdg', 'depth_net.seg_channels', 'loss_seg'}
-#: Table 3's camera-only rows: no LiDAR encoder, no fusion.
-CAMERA_KEYS = {'lidar_encoder', 'fusion'}
+#: Table 3's camera-only rows: no LiDAR encoder, no fusion (nor the
+#: encoder's point segmentation head and pretrained entry).
+CAMERA_KEYS = {
+    'lidar_encoder', 'fusion', 'point_seg_head', 'pretrained.lidar_encoder'
+}
 DELTAS = {
     FUSION: (MODEL_BASE, COUPLED | {'loss_mask_key'}),
     # SurroundOcc: a LiDAR voxel that divides the 0.5 m cell and the SCAL

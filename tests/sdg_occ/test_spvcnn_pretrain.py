@@ -1,10 +1,10 @@
 """The release's LiDAR-side start: SPVCNN pre-trained on lidarseg, then
 loaded into the SDG-OCC model through the checked ``pretrained`` entry.
 
-``configs/sdg_occ/spvcnn_4xb4-24e_nus-lidarseg.py`` trains one epoch (two
-iterations, batch 1) on the tests' tiny world's lidarseg labels with its
-paper-size encoder (0.1 m voxels); the checkpoint it saves then loads into
-the paper SDG-Fusion config's ``lidar_encoder`` with
+``configs/sdg_occ/pretrain/spvcnn_4xb4-24e_nus-lidarseg.py`` trains one
+epoch (two iterations, batch 1) on the tests' tiny world's lidarseg labels
+with its paper-size encoder (0.1 m voxels); the checkpoint it saves then
+loads into the paper SDG-Fusion config's ``lidar_encoder`` with
 ``pretrained.lidar_encoder.checkpoint`` set, every tensor but the BEV
 projection (which the pre-training has not) equal to the file's.
 """
@@ -24,7 +24,8 @@ from mmengine.runner import Runner
 from projects.occ_common.testing.tool_logs import REPO_ROOT, train_losses
 from projects.sdg_occ import SPVCNNSegmentor
 
-CONFIG = osp.join(REPO_ROOT, 'configs/sdg_occ/spvcnn_4xb4-24e_nus-lidarseg.py')
+CONFIG = osp.join(REPO_ROOT, 'configs', 'sdg_occ', 'pretrain',
+                  'spvcnn_4xb4-24e_nus-lidarseg.py')
 FUSION = osp.join(REPO_ROOT,
                   'configs/sdg_occ/sdgocc-fusion_r50_4xb2-24e_occ3d-nus.py')
 

@@ -43,8 +43,8 @@ model = dict(
     # (docs/train_test.md); checkpoint=None trains from scratch. The release
     # instead starts the camera side from BEVDet (`bevdet_pretrained` below)
     # and SPVCNN from a lidarseg pre-training (its best_iou_635_4.pth):
-    # train ../spvcnn_4xb4-24e_nus-lidarseg.py and set lidar_encoder's
-    # checkpoint to its file. None: neither checkpoint is published.
+    # train ../pretrain/spvcnn_* and set lidar_encoder's checkpoint to its
+    # file. None: neither checkpoint is published.
     pretrained=dict(
         img_backbone=dict(
             module='img_backbone', checkpoint='torchvision://resnet50',
@@ -166,8 +166,8 @@ bevdet_pretrained = dict(
     img_neck=dict(module='img_neck', checkpoint=_bevdet, prefix='img_neck.'),
     bev_encoder=dict(
         module='bev_encoder', checkpoint=_bevdet,
-        prefix='img_bev_encoder_backbone.', key_map=[(r'^layers\.', 'stages.')],
-        ignore=[r'\.downsample\.'],
+        prefix='img_bev_encoder_backbone.',
+        key_map=[(r'^layers\.', 'stages.')], ignore=[r'\.downsample\.'],
         allow_missing=[r'\.shortcut\.', r'^merges\.', r'^out\.']))
 
 # Schedule: AdamW lr 1e-4 with gradient clipping (paper); weight decay, clip

@@ -150,8 +150,8 @@ def depth_bin_coordinate(depth: Tensor, depth_bound: Sequence) -> Tensor:
     num = num_depth_bins(depth_bound)
     dmin, dmax, step, spacing = parse_depth_bound(depth_bound)
     if spacing == 'sid':
-        return torch.log(depth / dmin) * ((num - 1) /
-                                           _sid_log_ratio(dmin, dmax))
+        scale = (num - 1) / _sid_log_ratio(dmin, dmax)
+        return torch.log(depth / dmin) * scale
     return (depth - dmin) / step
 
 

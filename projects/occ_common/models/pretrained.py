@@ -140,8 +140,8 @@ def check_entries(pretrained: Optional[Mapping]) -> Dict[str, dict]:
     return entries
 
 
-def _check_key_map(name: str, key_map) -> Tuple[Tuple[re.Pattern, str],
-                                                 ...]:
+def _check_key_map(name: str,
+                   key_map) -> Tuple[Tuple[re.Pattern, str], ...]:
     """Compiled ``(pattern, replacement)`` pairs of an entry's
     ``key_map``."""
     pairs = []

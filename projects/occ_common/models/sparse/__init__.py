@@ -8,6 +8,7 @@ between backends.
 from .backend import (BACKENDS, resolve_backend, spconv_available,
                       spconv_supports_cuda)
 from .dense import scatter_bev, to_dense, to_dense_bev
+from .point_seg_head import PointSegHead
 from .point_voxel import (TrilinearPlan, coord_index, devoxelize,
                           point_to_voxel, point_voxel_offsets, scatter_mean,
                           trilinear_devoxelize, trilinear_plan, voxel_rows)
@@ -19,7 +20,6 @@ from .sparse_conv import (SparseConv, SparseConvBase, SparseInverseConv,
 from .sparse_norm_act import (LinearBNReLU, SparseBatchNorm, SparseReLU,
                               batch_norm_rows)
 from .sparse_tensor import SparseTensor
-from .point_seg_head import PointSegHead
 from .spvcnn_encoder import SPVCNNEncoder
 from .torch_backend import rulebook_conv
 

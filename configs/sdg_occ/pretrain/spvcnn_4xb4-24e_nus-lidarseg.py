@@ -1,12 +1,12 @@
 # SDG-OCC's LiDAR-side start (not in the paper): the authors' release loads
 # an SPVCNN trained for nuScenes-lidarseg (best_iou_635_4.pth). This trains
-# the SDG-OCC encoder (model.lidar_encoder of ./_base_/sdgocc-fusion_r50.py,
+# the SDG-OCC encoder (model.lidar_encoder of ../_base_/sdgocc-fusion_r50.py,
 # without its BEV projection) on the key frames' lidarseg labels, sweeps
 # merged and unlabelled, in the Occ3D ego frame; its checkpoint is then the
 # SDG configs' model.pretrained.lidar_encoder.checkpoint. Needs lidarseg.
-_base_ = ['../_base_/datasets/nus-occ-common.py',
-          '../_base_/datasets/occ3d-task.py', '../_base_/default_runtime.py',
-          './_base_/sdgocc-fusion_r50.py']
+_base_ = ['../../_base_/datasets/nus-occ-common.py',
+          '../../_base_/datasets/occ3d-task.py',
+          '../../_base_/default_runtime.py', '../_base_/sdgocc-fusion_r50.py']
 
 model = dict(
     _delete_=True, type='SPVCNNSegmentor',
