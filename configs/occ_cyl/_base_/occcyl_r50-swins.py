@@ -75,7 +75,9 @@ model = dict(
             type='RecomputedResNet', depth=50, num_stages=4,
             # Stages 0, 1, 2 and 3 feed the FPN (paper, Sec. IV.A).
             out_indices=(0, 1, 2, 3),
-            frozen_stages=1, norm_cfg=dict(type='BN', requires_grad=True),
+            # Stage 1 and BN statistics and affine frozen, as OCCFusion's
+            # (and mmdet's fine-tuning) ResNet.
+            frozen_stages=1, norm_cfg=dict(type='BN', requires_grad=False),
             norm_eval=True, style='pytorch',
             # DCNv2 in stages 3 and 4: the paper cites DCN [21] beside its
             # ResNet-50 and OCCFusion, its lineage, uses them there (+0.75 M
@@ -114,6 +116,9 @@ model = dict(
         type='TPVPolarFusion', cam_channels=_context_channels,
         lidar_channels=_point_channels, plane_channels=_plane_channels,
         num_groups=8,  # M of the spatial group pooling (paper, Table VII)
+        # The lineage's forms: OCCFusion's squeeze-excitation fusion gate
+        # (C -> C/2 -> C) and PointOcc's group MLP (Linear-ReLU-Linear).
+        fusion_gate='squeeze_excite', group_mlp_norm=False,
         # Recompute the group pooling and its MLPs in the backward (~1.9
         # GiB kept otherwise at the Table VI cylinder): for memory, exact.
         fused_lift=True, with_cp=True),
@@ -155,6 +160,8 @@ model = dict(
 # and milestones are not given (the lineage decays with a cosine): x0.1 at
 # 20 and 23 of 24 is mmdet3d's usual multistep shape. The pretrained image
 # backbone learns at a tenth of the rate, as in SurroundOcc and OCCFusion.
+# Clip norm 35 and the 500-iteration warm-up from 1/3 are SurroundOcc's (its
+# labels'); OCCFusion clips at 5000 and warms up from 1e-5.
 max_epochs = 24
 train_cfg = dict(type='EpochBasedTrainLoop', max_epochs=max_epochs,
                  val_interval=max_epochs)
