@@ -55,8 +55,8 @@ def test_squeeze_excite_gate_is_occfusions():
     w2 = fusion.gate[3].weight.view(4, 2)
     pooled = fused.mean(dim=(2, 3))
     gate = torch.sigmoid(torch.relu(pooled @ w1.T) @ w2.T)
-    torch.testing.assert_close(fusion(cam, lidar), fused * gate[..., None,
-                                                                 None])
+    torch.testing.assert_close(fusion(cam, lidar),
+                               fused * gate[:, :, None, None])
     assert sum(p.numel() for p in fusion.gate.parameters()) == 16
     assert sum(p.numel() for p in DynamicFusion2D(
         (3, 2), 4).gate.parameters()) == 20
