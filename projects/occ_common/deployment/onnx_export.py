@@ -19,9 +19,12 @@ import torch
 from torch import Tensor, nn
 
 from ..utils.device_path import forced_accelerator_path
+from .deform_conv import (DEFORM_CONV_OPSET, deformable_convs,
+                          exportable_deform_convs)
 
 #: Opset of the exported graphs: ``ScatterElements(reduction='max' /
-#: 'min')`` needs 18.
+#: 'min')`` needs 18; a graph with deformable convolutions gets
+#: :data:`~.deform_conv.DEFORM_CONV_OPSET` (19, ``DeformConv``).
 DEFAULT_OPSET = 18
 
 
@@ -32,7 +35,7 @@ def export_graph(module: nn.Module,
                  output_names: Sequence[str],
                  dynamic_axes: Optional[Mapping[str, Mapping[int,
                                                              str]]] = None,
-                 opset: int = DEFAULT_OPSET) -> str:
+                 opset: Optional[int] = None) -> str:
     """Trace ``module(*args)`` on the GPU code path and write ONNX.
 
     Args:
@@ -44,12 +47,24 @@ def export_graph(module: nn.Module,
         dynamic_axes (Mapping, optional): Input / output name -> axis ->
             symbolic name, e.g. ``{'points': {0: 'num_points'}}``.
             Defaults to None (all static).
-        opset (int): ONNX opset. Defaults to :data:`DEFAULT_OPSET`.
+        opset (int, optional): ONNX opset. Defaults to
+            :func:`required_opset`'s.
 
     Returns:
         str: ``path``.
+
+    Raises:
+        ValueError: An opset below 19 for a module with deformable
+            convolutions (ONNX ``DeformConv``), naming them.
     """
-    refuse_deformable_convs(module)
+    needed = required_opset(module)
+    opset = needed if opset is None else int(opset)
+    if opset < needed:
+        names = deformable_convs(module)
+        raise ValueError(
+            f'{len(names)} deformable convolutions (mmcv DCN), e.g. '
+            f'{names[:3]}, export as ONNX DeformConv, which needs opset '
+            f'{DEFORM_CONV_OPSET}; got opset {opset}')
     # The exporter restores the module's mode afterwards: a wrapper left in
     # training mode would put the whole model back into it.
     module.eval()
@@ -57,7 +72,7 @@ def export_graph(module: nn.Module,
     os.makedirs(folder, exist_ok=True)
     torch.onnx.register_custom_op_symbolic('aten::hypot', _hypot, opset)
     with torch.no_grad(), forced_accelerator_path(True), \
-            warnings.catch_warnings():
+            exportable_deform_convs(module), warnings.catch_warnings():
         # The legacy exporter's deprecation notice, the tracer's notes on
         # Python values (shapes and sizes, static by design) and
         # index_add's duplicate-index warning (only index_copy remains,
@@ -77,31 +92,11 @@ def export_graph(module: nn.Module,
     return path
 
 
-def refuse_deformable_convs(module: nn.Module) -> None:
-    """Raise, naming them, if ``module`` holds mmcv's deformable convs.
-
-    ONNX's standard operators do not cover mmcv's (modulated) deformable
-    convolution: mmcv writes its own custom operator, which onnxruntime
-    does not run without mmcv's operator library, and the legacy exporter
-    fails on it with an unrelated AttributeError. OccCylindrical's paper
-    configs have DCNv2 in ResNet stages 3-4.
-
-    Raises:
-        ValueError: Naming the first such layers and what to do.
-    """
-    from mmcv.ops import DeformConv2d, ModulatedDeformConv2d
-    names = [
-        name for name, child in module.named_modules()
-        if isinstance(child, (DeformConv2d, ModulatedDeformConv2d))
-    ]
-    if names:
-        raise ValueError(
-            f'{len(names)} deformable convolutions (mmcv DCN), e.g. '
-            f'{names[:3]}: ONNX export covers models without them (mmcv '
-            'exports DCN as its own custom operator, which onnxruntime '
-            'cannot run). Export a config whose image backbone has '
-            'dcn=None and stage_with_dcn all False, with weights trained '
-            'that way.')
+def required_opset(module: nn.Module) -> int:
+    """The lowest opset :func:`export_graph` writes ``module`` with:
+    :data:`DEFAULT_OPSET`, or ``DeformConv``'s 19 when it holds mmcv's
+    deformable convolutions."""
+    return DEFORM_CONV_OPSET if deformable_convs(module) else DEFAULT_OPSET
 
 
 def _hypot(g, x, y):
