@@ -1,8 +1,6 @@
-# SDG-OCC Table 3's "+FOAD" row (sdgocc-fusion-lss_*) over T = 2 key frames,
-# as the camera rows' -2f twins: the LSS lift of lss_lift_model on the
-# two-frame SDG-Fusion (../sdgocc-fusion-2f_*). The LSS lift reads no LiDAR,
-# so the previous key frames load none (the LiDAR encoder reads the current
-# frame's).
+# Table 3's "+FOAD" row (sdgocc-fusion-lss_*) over T = 2 key frames
+# (../sdgocc-fusion-2f_*). The LSS lift reads no LiDAR: the previous frames
+# load none (the LiDAR encoder reads the current frame's).
 _base_ = ['../sdgocc-fusion-2f_r50_4xb2-24e_occ3d-nus.py']
 
 model = _base_.lss_lift_model

@@ -1,9 +1,7 @@
-# SDG-OCC's LiDAR-side start (not in the paper): the authors' release loads
-# an SPVCNN trained for nuScenes-lidarseg (best_iou_635_4.pth). This trains
-# the SDG-OCC encoder (model.lidar_encoder of ../_base_/sdgocc-fusion_r50.py,
-# without its BEV projection) on the key frames' lidarseg labels, sweeps
-# merged and unlabelled, in the Occ3D ego frame; its checkpoint is then the
-# SDG configs' model.pretrained.lidar_encoder.checkpoint. Needs lidarseg.
+# SDG-OCC's release starts SPVCNN from a lidarseg training (not in the
+# paper). This trains the SDG encoder (no BEV projection) on the key frames'
+# lidarseg labels (sweeps unlabelled), Occ3D's ego frame; its checkpoint is
+# then the SDG configs' model.pretrained.lidar_encoder.checkpoint.
 _base_ = ['../../_base_/datasets/nus-occ-common.py',
           '../../_base_/datasets/occ3d-task.py',
           '../../_base_/default_runtime.py', '../_base_/sdgocc-fusion_r50.py']
@@ -24,8 +22,7 @@ train_dataloader = dict(
     batch_size=4, dataset=dict(_base_._occ_dataset, pipeline=train_pipeline))
 val_dataloader = test_dataloader = val_evaluator = test_evaluator = None
 val_cfg = test_cfg = None
-# The release's pre-training schedule is not published: the detector's
-# AdamW and warm-up at 10x its rate (a from-scratch network), cosine decay.
+# Schedule unpublished: the detector's at 10x the rate, cosine decay.
 optim_wrapper = dict(optimizer=dict(lr=1e-3))
 param_scheduler = _base_.param_scheduler + [dict(
     type='CosineAnnealingLR', by_epoch=True, T_max=_base_.max_epochs,
