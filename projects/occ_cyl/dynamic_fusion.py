@@ -8,7 +8,6 @@ from mmdet3d.utils import ConfigType, OptMultiConfig
 from mmengine.model import BaseModule
 from torch import Tensor, nn
 
-
 #: DynamicFusion2D's channel gates.
 GATES = ('conv', 'squeeze_excite')
 
