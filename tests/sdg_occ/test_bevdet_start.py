@@ -9,19 +9,17 @@ a 3x3 ``downsample`` conv with bias where this encoder has a 1x1 conv + BN
 ``shortcut``), plus what no entry loads (the depth net, FPN-LSS, the
 detection head). Every tensor is a distinct constant (stride 0: a few kB).
 """
-import logging
 import os.path as osp
 
 import pytest
 import torch
 from mmdet3d.registry import MODELS
 from mmengine.config import Config
-from mmengine.logging import MMLogger
 from mmengine.registry import init_default_scope
 
 import projects.sdg_occ  # noqa: F401  (registers)
 from projects.occ_common.models.pretrained import PretrainedMismatchError
-from projects.occ_common.testing.tool_logs import REPO_ROOT
+from projects.occ_common.testing.tool_logs import REPO_ROOT, quiet_logger
 
 CONFIG = osp.join(REPO_ROOT, 'configs', 'sdg_occ',
                   'sdgocc-fusion_r50_4xb2-24e_occ3d-nus.py')
@@ -73,13 +71,8 @@ def started(tmp_path_factory):
     torch.manual_seed(0)
     model = MODELS.build(cfg.model)
     state = _bevdet_file(model, path)
-    logger = MMLogger.get_current_instance()
-    level = logger.level
-    logger.setLevel(logging.WARNING)
-    try:
+    with quiet_logger():
         model.init_weights()
-    finally:
-        logger.setLevel(level)
     return model, state, cfg, path
 
 

@@ -10,18 +10,17 @@ projection (which the pre-training has not) equal to the file's.
 """
 import copy
 import glob
-import logging
 import os.path as osp
 
 import pytest
 import torch
 from mmdet3d.registry import MODELS
 from mmengine.config import Config
-from mmengine.logging import MMLogger
 from mmengine.registry import init_default_scope
 from mmengine.runner import Runner
 
-from projects.occ_common.testing.tool_logs import REPO_ROOT, train_losses
+from projects.occ_common.testing.tool_logs import (REPO_ROOT, quiet_logger,
+                                                   train_losses)
 from projects.sdg_occ import SPVCNNSegmentor
 
 CONFIG = osp.join(REPO_ROOT, 'configs', 'sdg_occ', 'pretrain',
@@ -85,13 +84,8 @@ def test_checkpoint_loads_into_the_fusion_model(pretrained):
     })
     init_default_scope('mmdet3d')
     fusion = MODELS.build(cfg.model)
-    logger = MMLogger.get_current_instance()
-    level = logger.level
-    logger.setLevel(logging.WARNING)
-    try:
+    with quiet_logger():
         fusion.init_weights()
-    finally:
-        logger.setLevel(level)
     trained = model.lidar_encoder.state_dict()
     loaded = fusion.lidar_encoder.state_dict()
     assert set(loaded) - set(trained) == {
