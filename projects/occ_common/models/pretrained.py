@@ -26,8 +26,10 @@ patches, not RGB in 4 x 4, and ``load_state_dict`` raises on the shape).
 Here instead:
 
 * without a checkpoint the part keeps its initialisation and must train
-  normally: frozen stages or frozen BN statistics (``frozen_stages >= 0``,
-  ``norm_eval=True``) are refused, they would freeze random weights;
+  normally: frozen stages, frozen BN statistics or any parameter that
+  does not train (``frozen_stages >= 0``, ``norm_eval=True``, a
+  ``norm_cfg`` with ``requires_grad=False``) are refused, they would
+  freeze random weights;
 * with one, the file's keys are renamed by ``key_map`` (after ``prefix``:
   each ``(pattern, replacement)`` pair is applied with :func:`re.sub`, in
   order, so a checkpoint of another codebase whose layers carry other
@@ -317,6 +319,14 @@ def _check_trains_normally(module: nn.Module, name: str) -> None:
             f'norm_eval={norm_eval}: that would freeze randomly initialised '
             'layers and BN statistics. Give the entry a checkpoint, or set '
             'frozen_stages=-1 and norm_eval=False to train it from scratch')
+    fixed = [n for n, p in module.named_parameters() if not p.requires_grad]
+    if fixed:
+        raise ValueError(
+            f'pretrained.{name}: no checkpoint, but {len(fixed)} parameters '
+            f'of {type(module).__name__} do not train (first: {fixed[0]}; '
+            'e.g. norm_cfg=dict(..., requires_grad=False)): they would '
+            'stay at their initialisation. Give the entry a checkpoint, or '
+            'let them train (norm_cfg requires_grad=True)')
 
 
 def _describe(key, theirs: Mapping, own: Mapping) -> str:
