@@ -182,10 +182,14 @@ def main(argv=None):
         except (FileNotFoundError, ValueError, RefusedGlobalError) as err:
             sys.exit(f'occ_demo.py: error: {err}')
         packed, output = inference_occupancy(model, dataset, sample.index)
+    # Both named by the token, checked by sample_info_file (and again by
+    # write_occ3d_prediction): nothing is written outside --out-dir.
+    prediction = write_occ3d_prediction(args.out_dir, sample.token,
+                                        output.pred_occ)
     written = [
-        write_occ3d_prediction(args.out_dir, sample.token, output.pred_occ),
+        prediction,
         draw(cfg, dataset, packed, output,
-             osp.join(args.out_dir, f'{sample.token}.png'))
+             osp.splitext(prediction)[0] + '.png')
     ]
     for kind, path in zip(('prediction', 'picture'), written):
         print(f'{kind}: {path}')

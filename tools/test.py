@@ -38,7 +38,7 @@ from projects.occ_common.engine.config_checks import (CfgOptionsAction,
                                                       apply_cfg_options,
                                                       cfg_errors_exit)
 from projects.occ_common.engine.cpu_dist import (finalize_distributed,
-                                                 setup_cpu_distributed)
+                                                 setup_distributed)
 
 
 def parse_args(argv=None):
@@ -162,7 +162,7 @@ def main(argv=None):
     args = parse_args(argv)
     with cfg_errors_exit():
         cfg = build_cfg(args)
-    setup_cpu_distributed(cfg)
+    setup_distributed(cfg)
     if 'runner_type' not in cfg:
         runner = Runner.from_cfg(cfg)
     else:

@@ -11,12 +11,17 @@ complete checkpoint of the latest step of the work dir even without a
 The script adds ``CheckpointMatchHook``: a ``load_from`` checkpoint whose
 keys or shapes differ from the model's is refused unless
 ``--allow-key-mismatch``, and a ``--resume`` checkpoint of another model
-always, each naming the file and the first mismatched keys.
+(or whose optimizer / schedule values differ from the config's) always,
+each naming the file and the first mismatched keys. The run owns its work
+dir (``engine/run_lock.py``): a second run into a work dir in use, or a
+run without ``--resume`` into one holding an earlier run's checkpoints,
+ends with one line naming it.
 """
 import argparse
 import logging
 import os
 import os.path as osp
+import sys
 
 from mmengine.config import Config
 from mmengine.logging import print_log
@@ -27,7 +32,8 @@ from projects.occ_common.engine.config_checks import (CfgOptionsAction,
                                                       apply_cfg_options,
                                                       cfg_errors_exit)
 from projects.occ_common.engine.cpu_dist import (finalize_distributed,
-                                                 setup_cpu_distributed)
+                                                 setup_distributed)
+from projects.occ_common.engine.run_lock import WorkDirError, hold_work_dir
 
 
 def parse_args(argv=None):
@@ -138,9 +144,14 @@ def build_cfg(args) -> Config:
         dict(
             type='CheckpointMatchHook',
             allow_key_mismatch=args.allow_key_mismatch,
-            training=True)
+            training=True),
+        dict(type='WorkDirLockHook')
     ]
     return cfg
+
+
+def _warn(message: str) -> None:
+    print_log(message, logger='current', level=logging.WARNING)
 
 
 def main(argv=None):
@@ -148,12 +159,18 @@ def main(argv=None):
     args = parse_args(argv)
     with cfg_errors_exit():
         cfg = build_cfg(args)
-    setup_cpu_distributed(cfg)
-    if 'runner_type' not in cfg:
-        runner = Runner.from_cfg(cfg)
-    else:
-        runner = RUNNERS.build(cfg)
-    runner.train()
+    setup_distributed(cfg)
+    try:
+        # The work dir is this run's from before the Runner writes to it
+        # (its config copy, logs) until the run ends.
+        with hold_work_dir(cfg.work_dir, cfg.resume, _warn):
+            if 'runner_type' not in cfg:
+                runner = Runner.from_cfg(cfg)
+            else:
+                runner = RUNNERS.build(cfg)
+            runner.train()
+    except WorkDirError as err:
+        sys.exit(f'{osp.basename(sys.argv[0] or "train.py")}: error: {err}')
     finalize_distributed()
 
 

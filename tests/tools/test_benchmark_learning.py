@@ -95,19 +95,22 @@ def _train(spec):
 
 @pytest.mark.slow
 def test_resume_continues_curves_and_clock(tmp_path):
-    """3 iterations, then the same work dir with a budget of 6 resumes at
-    iteration 3: one loss point per iteration (log interval 1), validation
-    of the untrained model (0), at 3 and 6 (not again at 3 on resuming),
+    """A run of 6 iterations stopped at iteration 1 (a CPU-time limit of
+    60 ns stands in for a kill after the first checkpoint), then the same
+    run without the limit resumes at iteration 1 with the same schedule
+    (tools/train.py refuses a resume whose schedule differs from the
+    checkpoint's): one loss point per iteration (log interval 1),
+    validation of the untrained model (0), at the stop (1), at 3 and 6,
     and the training time of both segments adds up."""
     work = str(tmp_path / 'train')
-    first = _train(_spec(work, 3))
-    assert (first['iterations'], first['stopped_by_time']) == (3, False)
+    first = _train(_spec(work, 6, max_cpu_minutes=1e-9))
+    assert (first['iterations'], first['stopped_by_time']) == (1, True)
     second = _train(_spec(work, 6))
-    assert second['iterations'] == 6
+    assert (second['iterations'], second['stopped_by_time']) == (6, False)
     assert second['train_seconds'] > first['train_seconds'] > 0
     curves = _tool().read_curves(work)
     assert [s for s, _ in curves['loss']] == [1, 2, 3, 4, 5, 6]
-    assert [s for s, _ in curves['val']] == [0, 3, 6]
+    assert [s for s, _ in curves['val']] == [0, 1, 3, 6]
     assert 'occ/mIoU' in curves['val'][-1][1]
 
 

@@ -15,6 +15,7 @@ import pytest
 from PIL import Image
 
 from projects.occ_common.fileio.safe_pickle import load_info_file
+from projects.occ_common.testing.mmdet3d_infos import write_mmdet3d_info_file
 from projects.occ_common.testing.tool_logs import run_create_data
 from projects.occ_common.transforms import LoadMultiViewImagesOcc
 
@@ -145,40 +146,8 @@ def test_extend_mmdet3d_info_file(world_copy, tmp_path):
     before, they were not recorded, and a view resized after the
     conversion loaded without an error)."""
     ours = _infos(world_copy)['data_list']
-    theirs = []
-    for e in ours:
-        theirs.append(dict(
-            sample_idx=e['sample_idx'], token=e['token'],
-            timestamp=e['timestamp'], ego2global=e['ego2global'],
-            lidar_points=dict(
-                num_pts_feats=5,
-                lidar_path=osp.basename(e['lidar_points']['lidar_path']),
-                lidar2ego=e['lidar_points']['lidar2ego']),
-            lidar_sweeps=[
-                dict(lidar_points=dict(
-                    lidar_path='data/nuscenes/' + s['lidar_points']
-                    ['lidar_path'],
-                    lidar2ego=s['lidar_points']['lidar2ego'],
-                    lidar2sensor=s['lidar_points']['lidar2sensor'],
-                    sensor2lidar=s['lidar_points']['sensor2lidar']),
-                     ego2global=s['ego2global'],
-                     timestamp=s['timestamp'],
-                     sample_data_token=s['sample_data_token'])
-                for s in e['lidar_sweeps']
-            ],
-            images={
-                cam: dict(img_path=osp.basename(i['img_path']),
-                          **{k: i[k] for k in ('cam2img', 'lidar2cam',
-                                               'cam2ego', 'timestamp',
-                                               'sample_data_token')})
-                for cam, i in e['images'].items()
-            },
-            pts_semantic_mask_path=osp.basename(e['pts_semantic_mask_path']),
-            instances=[]))
-    mmdet3d_file = str(tmp_path / 'nuscenes_infos_train.pkl')
-    mmengine.dump(dict(metainfo=dict(version='v1.0-mini', info_version='1.1',
-                                     dataset='nuscenes'),
-                       data_list=theirs), mmdet3d_file)
+    mmdet3d_file = write_mmdet3d_info_file(
+        str(tmp_path / 'nuscenes_infos_train.pkl'), ours)
     out = str(tmp_path / 'out')
     written = run_create_data('--root-path', world_copy, '--out-dir', out,
                               '--from-mmdet3d-info', mmdet3d_file)

@@ -226,12 +226,14 @@ def make_real_root(sample_dir, root):
     from projects.occ_common.datasets.nuscenes_classes import \
         LIDARSEG_RAW_CLASS_NAMES
     from projects.occ_common.datasets.occ_formats import OCC_FORMATS
+    from projects.occ_common.fileio.safe_names import safe_file_name
     from projects.occ_common.fileio.safe_pickle import load_info_file
     infos = load_info_file(osp.join(sample_dir, INFO_FILE))
     for name in os.listdir(sample_dir):
         if name != INFO_FILE and not name.endswith('.md'):
             os.symlink(osp.join(sample_dir, name), osp.join(root, name))
     entry = infos['data_list'][0]
+    token = safe_file_name(entry['token'], 'sample token', INFO_FILE)
     lidar = entry['lidar_points']
     key_file = osp.join(sample_dir, osp.basename(lidar['lidar_path']))
     num_points = osp.getsize(key_file) // (4 * lidar['num_pts_feats'])
@@ -245,7 +247,7 @@ def make_real_root(sample_dir, root):
             timestamp=entry['timestamp'] - SWEEP_PERIOD * (k + 1))
         for k in range(NUM_SWEEPS)
     ]
-    seg = f'{entry["token"]}_lidarseg.bin'
+    seg = f'{token}_lidarseg.bin'
     np.full(num_points, LIDARSEG_RAW_CLASS_NAMES.index(STAND_IN_LIDARSEG),
             np.uint8).tofile(osp.join(root, seg))
     entry['pts_semantic_mask_path'] = seg
@@ -254,7 +256,7 @@ def make_real_root(sample_dir, root):
                            osp.basename(lidar['lidar_path']) + '.npy')
     os.makedirs(osp.dirname(surroundocc))
     np.save(surroundocc, np.zeros((0, 4), np.int64))
-    occ3d = osp.join(root, 'gts', 'real_sample', entry['token'],
+    occ3d = osp.join(root, 'gts', 'real_sample', token,
                      'labels.npz')
     os.makedirs(osp.dirname(occ3d))
     spec = OCC_FORMATS['occ3d']

@@ -381,7 +381,8 @@ def _train_clock_hook(max_seconds: Optional[float], path: str,
             meta = checkpoint.get('meta', {})
             self.seconds = float(meta.get('train_seconds', 0.0))
             self.cpu_seconds = float(meta.get('train_cpu_seconds', 0.0))
-            self.stopped_by_time = bool(meta.get('stopped_by_time', False))
+            # Not restored: a resumed run goes on, and says it stopped by
+            # time only if its own limit stops it again.
 
         def after_train(self, runner):
             self._write(runner)
@@ -455,7 +456,8 @@ def read_curves(work_dir: str) -> Dict[str, List]:
     """
     loss, val = {}, {}
     for path in sorted(
-            glob.glob(osp.join(work_dir, '*', 'vis_data', 'scalars.json'))):
+            glob.glob(osp.join(glob.escape(work_dir), '*', 'vis_data',
+                               'scalars.json'))):
         for record in read_json_lines(path):
             step = int(record['step'])
             if 'loss' in record:
@@ -672,7 +674,7 @@ def main(argv=None):
     # The table holds every finished run of OUT, also those of earlier
     # invocations (other budgets or options: see each run's settings).
     rows = [_load_json(path) for path in sorted(
-        glob.glob(osp.join(out, 'runs', '*', RESULT)))]
+        glob.glob(osp.join(glob.escape(out), 'runs', '*', RESULT)))]
     table = format_table(rows, [
         ('train CPU time (all threads)',
          lambda r: f'{r.get("train_cpu_s", math.nan) / 60:.1f} min'),

@@ -105,7 +105,7 @@ def real_sample(cfg, folder):
     Returns:
         dict: ``inputs`` and ``data_samples`` as a dataset item.
     """
-    (pkl, ) = glob.glob(osp.join(folder, '*.pkl'))
+    (pkl, ) = glob.glob(osp.join(glob.escape(folder), '*.pkl'))
     # A downloaded info file: the restricted unpickler, as everywhere.
     info = load_info_file(pkl)['data_list'][0]
     lidar = info['lidar_points']

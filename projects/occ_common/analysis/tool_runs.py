@@ -257,7 +257,7 @@ def last_metrics(work_dir: str) -> Dict[str, float]:
     Raises:
         SystemExit: If no log or no ``occ/mIoU`` record is found.
     """
-    logs = sorted(glob.glob(osp.join(work_dir, '*', '*.json')))
+    logs = sorted(glob.glob(osp.join(glob.escape(work_dir), '*', '*.json')))
     if not logs:
         raise SystemExit(f'no metrics logged in {work_dir}')
     metrics = [r for r in read_json_lines(logs[-1]) if 'occ/mIoU' in r]

@@ -12,17 +12,15 @@ from ..fileio.safe_pickle import load_info_file
 from .augmentation_seed import EpochSeed
 from .info_format import CAMERA_NAMES, as_matrix, check_info_file
 from .occ_formats import IGNORE_INDEX, OCC_FORMATS
+from .sample_checks import (check_previous_time, check_rigid, check_seconds,
+                            check_sweep_time)
 
 _MAT44 = [(4, 4)]
 
 
-def _check_seconds(value, where: str) -> None:
-    """Refuse a timestamp that is not a number (a string would fail much
-    later, in the sweep merge, without naming the file)."""
-    if isinstance(value, bool) or not isinstance(
-            value, (int, float, np.integer, np.floating)):
-        raise ValueError(f'{where}: expected a number of seconds, got '
-                         f'{type(value).__name__} {value!r:.40}')
+def _pose(value, where: str) -> np.ndarray:
+    """A 4x4 pose or extrinsic calibration: finite and rigid."""
+    return check_rigid(as_matrix(value, _MAT44, where), where)
 
 
 @DATASETS.register_module()
@@ -217,6 +215,7 @@ class NuScenesOccDataset(BaseDataset):
                 f'{self.num_frames}; re-create the info file with '
                 'tools/create_data.py --overwrite')
         frames, link = [], info['prev_key_frame']
+        later = info['timestamp']
         current = dict(token=info['token'], ego2global=info['ego2global'],
                        lidar2ego=info['lidar2ego'],
                        lidar_path=info['lidar_path'],
@@ -227,6 +226,11 @@ class NuScenesOccDataset(BaseDataset):
                 frames.append(frames[-1] if frames else current)
                 continue
             frames.append(self._parse_link(link, f'{where} frame t-{k}'))
+            # A frame of the past, within the stated gap (sample_checks).
+            previous = check_seconds(link.get('timestamp'),
+                                     f'{where} frame t-{k} timestamp')
+            check_previous_time(previous, later, f'{where} frame t-{k}')
+            later = previous
             if k + 1 < self.num_frames:
                 if link['token'] not in by_token:
                     raise ValueError(
@@ -242,10 +246,9 @@ class NuScenesOccDataset(BaseDataset):
                             where)
         return dict(
             token=link['token'],
-            ego2global=as_matrix(link['ego2global'], _MAT44,
-                                 f'{where} ego2global'),
-            lidar2ego=as_matrix(lidar['lidar2ego'], _MAT44,
-                                f'{where} lidar_points.lidar2ego'),
+            ego2global=_pose(link['ego2global'], f'{where} ego2global'),
+            lidar2ego=_pose(lidar['lidar2ego'],
+                            f'{where} lidar_points.lidar2ego'),
             lidar_path=self._join('pts', lidar['lidar_path']),
             num_pts_feats=lidar['num_pts_feats'],
             images=self._parse_images(link, where))
@@ -274,23 +277,23 @@ class NuScenesOccDataset(BaseDataset):
         lidar['lidar_path'] = self._join('pts', lidar['lidar_path'])
         info['lidar_path'] = lidar['lidar_path']
         info['num_pts_feats'] = lidar['num_pts_feats']
-        info['lidar2ego'] = as_matrix(lidar['lidar2ego'], _MAT44,
-                                      f'{where} lidar_points.lidar2ego')
-        info['ego2global'] = as_matrix(info['ego2global'], _MAT44,
-                                       f'{where} ego2global')
-        _check_seconds(info['timestamp'], f'{where} timestamp')
+        info['lidar2ego'] = _pose(lidar['lidar2ego'],
+                                  f'{where} lidar_points.lidar2ego')
+        info['ego2global'] = _pose(info['ego2global'], f'{where} ego2global')
+        key_time = check_seconds(info['timestamp'], f'{where} timestamp')
         for i in range(len(info['lidar_sweeps'])):
             name = f'{where} lidar_sweeps[{i}]'
             sweep = self._entry(info['lidar_sweeps'], i,
                                 ('lidar_points', 'timestamp'), name)
-            _check_seconds(sweep['timestamp'], f'{name}.timestamp')
+            check_sweep_time(
+                check_seconds(sweep['timestamp'], f'{name}.timestamp'),
+                key_time, name)
             pts = self._entry(sweep, 'lidar_points', ('lidar_path', ), name)
             key = 'sensor2lidar' if 'sensor2lidar' in pts else 'lidar2sensor'
             if key not in pts:
                 raise ValueError(f'{name}: lidar_points needs sensor2lidar '
                                  f'or lidar2sensor; it has {sorted(pts)}')
-            pts[key] = as_matrix(pts[key], _MAT44,
-                                 f'{name}.lidar_points.{key}')
+            pts[key] = _pose(pts[key], f'{name}.lidar_points.{key}')
             pts['lidar_path'] = self._join('sweeps', pts['lidar_path'])
         info['images'] = self._parse_images(info, where)
         info['pts_semantic_mask_path'] = self._join(
@@ -320,8 +323,7 @@ class NuScenesOccDataset(BaseDataset):
             image['cam2img'] = as_matrix(image['cam2img'], [(3, 3), (4, 4)],
                                          f'{where} images.{cam}.cam2img')
             for key in ('lidar2cam', 'cam2ego'):
-                image[key] = as_matrix(image[key], _MAT44,
-                                       f'{where} images.{cam}.{key}')
+                image[key] = _pose(image[key], f'{where} images.{cam}.{key}')
             images[cam] = image
         return images
 

@@ -23,6 +23,7 @@ import os.path as osp
 import warnings
 from typing import Mapping, NamedTuple, Optional
 
+from ..fileio.safe_names import safe_file_name
 from ..fileio.safe_pickle import load_info_file
 from .info_format import INFO_VERSION, check_info_file
 
@@ -122,8 +123,9 @@ def select_sample(data_list: list,
 
 
 def _convert_mmdet3d_sample(infos: dict, index: int, info_file: str,
-                            data_root: str, out_dir: str) -> str:
-    """Write the one-sample info file of ``data_list[index]``."""
+                            data_root: str, target: str) -> str:
+    """Write the one-sample info file of ``data_list[index]`` to
+    ``target``."""
     from .converters.extend_mmdet3d_infos import (_Resolver, _scene_index,
                                                   extend_entry)
     from .converters.nuscenes_occ_converter import write_info_file
@@ -141,8 +143,7 @@ def _convert_mmdet3d_sample(infos: dict, index: int, info_file: str,
         # The scene only selects the rainy / night evaluation subsets.
         if not line.startswith('scene unknown'):
             warnings.warn(f'{info_file}: {line}')
-    os.makedirs(out_dir, exist_ok=True)
-    target = osp.join(out_dir, f'{info["token"]}_info.pkl')
+    os.makedirs(osp.dirname(target), exist_ok=True)
     write_info_file(target, [info], version, 'demo', synthetic=False,
                     extended_from=osp.basename(info_file),
                     mmdet3d_info_version=meta.get('info_version'))
@@ -182,11 +183,15 @@ def sample_info_file(info_file: str,
     infos = load_info_file(info_file)
     kind = info_file_kind(infos, info_file)
     chosen = select_sample(infos['data_list'], info_file, index, token)
-    sample_token = infos['data_list'][chosen]['token']
+    # Checked here, before anything is written: the token names files.
+    sample_token = safe_file_name(infos['data_list'][chosen]['token'],
+                                  'sample token', info_file)
     if kind == 'occ':
         return SampleInfo(info_file, chosen, sample_token, kind)
-    path = _convert_mmdet3d_sample(infos, chosen, info_file, data_root,
-                                   out_dir)
+    # Named by the checked token: nothing is written outside out_dir.
+    path = _convert_mmdet3d_sample(
+        infos, chosen, info_file, data_root,
+        osp.join(out_dir, f'{sample_token}_info.pkl'))
     return SampleInfo(path, 0, sample_token, kind)
 
 

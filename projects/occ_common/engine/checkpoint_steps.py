@@ -33,6 +33,28 @@ def name_step(path: str) -> Optional[Tuple[str, int]]:
     return (match[1], int(match[2])) if match else None
 
 
+def step_checkpoints(folder: str) -> List[str]:
+    """The ``epoch_N.pth`` / ``iter_N.pth`` files of ``folder``, by name.
+
+    Listed with ``os.listdir``, never a glob pattern: a work dir named
+    ``exp[1]`` is a pattern matching ``exp1`` to glob, which then found no
+    checkpoint, and ``--resume`` trained from scratch over them.
+
+    Args:
+        folder (str): A work dir; a missing one holds none.
+
+    Returns:
+        list[str]: Their paths (regular files only), sorted by name.
+    """
+    if not osp.isdir(folder):
+        return []
+    return [
+        osp.join(folder, name) for name in sorted(os.listdir(folder))
+        if name_step(name) is not None
+        and osp.isfile(osp.join(folder, name))
+    ]
+
+
 def meta_step(path: str) -> Optional[int]:
     """The iteration saved in a checkpoint's ``meta`` (loads the file).
 

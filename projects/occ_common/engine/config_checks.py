@@ -25,6 +25,8 @@ run these checks first:
   ``train_pipeline``, ...), since configs name their shared values at the
   top level by design; a real typo of a Runner key is almost always one or
   two keystrokes away from it. Keys starting with ``_`` are never checked.
+* :func:`import_overridden_modules`: an override of ``custom_imports``
+  is imported (``Config.fromfile`` imports only the file's own).
 * :func:`check_env_cfg`: ``env_cfg`` is a closed dict (mmengine's
   ``Runner.setup_env`` reads :data:`ENV_CFG_KEYS` and ignores any other
   key, so ``cudnn_benchmak=True`` was silently dropped): every other key
@@ -385,7 +387,41 @@ def merge_cfg_options(cfg,
         check_env_cfg(cfg, option)
     except ValueError as err:
         raise CfgOptionsError(str(err)) from err
+    import_overridden_modules(cfg, options, option)
     return sorted(options)
+
+
+def import_overridden_modules(cfg, options: Dict[str, Any],
+                              option: str = '--cfg-options') -> None:
+    """Import ``custom_imports`` when an override changed it.
+
+    ``Config.fromfile`` imports a config's ``custom_imports`` while it
+    reads the file; an override merged afterwards was never imported, so
+    ``--cfg-options custom_imports.imports=[my.module]`` silently left the
+    module (and the registry entries it adds) out.
+
+    Args:
+        cfg (mmengine.Config): The config with the overrides merged.
+        options (dict): The overrides.
+        option (str): The command-line option, for the message.
+
+    Raises:
+        CfgOptionsError: If ``custom_imports`` is not
+            ``dict(imports=[...], ...)`` or a module fails to import.
+    """
+    if not any(key == 'custom_imports' or key.startswith('custom_imports.')
+               for key in options):
+        return
+    from mmengine.utils import import_modules_from_strings
+    imports = cfg.get('custom_imports')
+    if not isinstance(imports, Mapping) or 'imports' not in imports:
+        raise CfgOptionsError(
+            f'{option}: custom_imports must be dict(imports=[MODULE, ...]'
+            f', allow_failed_imports=False), got {imports!r:.80}')
+    try:
+        import_modules_from_strings(**imports)
+    except (ImportError, TypeError) as err:
+        raise CfgOptionsError(f'{option}: custom_imports: {err}') from err
 
 
 def apply_cfg_options(cfg, args, dest: str = 'cfg_options') -> List[str]:
@@ -416,6 +452,6 @@ def apply_cfg_options(cfg, args, dest: str = 'cfg_options') -> List[str]:
 __all__ = [
     'CfgOptionsAction', 'CfgOptionsError', 'apply_cfg_options',
     'cfg_errors_exit', 'check_cfg_options', 'check_env_cfg',
-    'check_top_level_keys', 'edit_distance', 'merge_cfg_options',
-    'runner_keys'
+    'check_top_level_keys', 'edit_distance', 'import_overridden_modules',
+    'merge_cfg_options', 'runner_keys'
 ]

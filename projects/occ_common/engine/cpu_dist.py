@@ -1,12 +1,13 @@
-"""CPU-only multi-process support for tools/train.py and tools/test.py.
+"""Process groups of tools/train.py and tools/test.py, on CPU and CUDA.
 
 mmengine 0.10.7 assumes CUDA under ``--launcher pytorch``: its
 ``init_dist`` calls ``torch.cuda.set_device`` and the Runner wraps the model
-in DDP with ``device_ids=[LOCAL_RANK]``, which DDP refuses for CPU modules.
-These helpers do nothing on CUDA machines. They live in the package (not
-beside the tools) so that the tools import them like any installed module,
-whatever the working directory; the models still come from each config's
-``custom_imports``.
+in DDP with ``device_ids=[LOCAL_RANK]``, which DDP refuses for CPU modules;
+the CPU path here uses gloo and no device ids. On every device the group
+forms under a deadline (:mod:`.dist_rendezvous`). These helpers live in the
+package (not beside the tools) so that the tools import them like any
+installed module, whatever the working directory; the models still come
+from each config's ``custom_imports``.
 """
 import logging
 import os
@@ -15,6 +16,8 @@ import sys
 import torch
 import torch.distributed as dist
 from mmengine.config import Config
+
+from .dist_rendezvous import rendezvous_deadline
 
 #: Backends that need CUDA devices; a CPU run uses gloo in their place.
 CUDA_ONLY_BACKENDS = ('nccl', )
@@ -38,30 +41,45 @@ def cpu_backend(dist_cfg: dict) -> str:
     return 'gloo' if backend in CUDA_ONLY_BACKENDS else backend
 
 
-def setup_cpu_distributed(cfg: Config) -> None:
-    """Initialise the process group for a CPU run and fix DDP's devices.
+def setup_distributed(cfg: Config) -> None:
+    """Form the process group before the Runner is built; fix DDP's
+    devices on the CPU.
 
-    The group is initialised with :func:`cpu_backend` of the config's
-    ``env_cfg.dist_cfg`` (gloo in place of nccl), so the Runner skips its
-    own CUDA-only initialisation, and DDP gets ``device_ids=None``. On a
-    CUDA machine nothing is done: the Runner initialises the config's
-    backend (nccl) itself.
+    The group forms under a deadline (:mod:`.dist_rendezvous`): a rank
+    whose peers do not all arrive exits naming itself and the address
+    instead of waiting silently. On a CUDA machine mmengine's
+    ``init_dist`` initialises the config's ``env_cfg.dist_cfg`` (nccl),
+    as the Runner would (it then skips its own). Without CUDA the group
+    uses :func:`cpu_backend` of it (gloo in place of nccl), and DDP gets
+    ``device_ids=None``.
 
     Args:
         cfg (Config): The config after the command-line overrides; its
             ``launcher`` says whether the run is distributed.
     """
-    if cfg.launcher == 'none' or torch.cuda.is_available():
+    if cfg.launcher == 'none':
+        return
+    dist_cfg = dict(cfg.get('env_cfg', {}).get('dist_cfg', {}))
+    if torch.cuda.is_available():
+        if not dist.is_initialized():
+            from mmengine.dist import init_dist
+            with rendezvous_deadline():
+                init_dist(cfg.launcher, **dist_cfg)
         return
     if not dist.is_initialized():
-        dist_cfg = cfg.get('env_cfg', {}).get('dist_cfg', {})
-        dist.init_process_group(backend=cpu_backend(dist_cfg))
+        with rendezvous_deadline():
+            dist.init_process_group(backend=cpu_backend(dist_cfg))
     wrapper = cfg.get('model_wrapper_cfg') or dict(
         type='MMDistributedDataParallel',
         broadcast_buffers=False,
         find_unused_parameters=cfg.get('find_unused_parameters', False))
     wrapper['device_ids'] = None
     cfg.model_wrapper_cfg = wrapper
+
+
+#: The name of :func:`setup_distributed` in earlier versions (it then
+#: formed CPU groups only).
+setup_cpu_distributed = setup_distributed
 
 
 def finalize_distributed() -> None:

@@ -33,6 +33,8 @@ from typing import Iterable
 
 import numpy as np
 
+from ..fileio.safe_names import safe_file_name
+
 #: Keys of the grid in an Occ3D prediction file (see the module docstring).
 OCC3D_PRED_KEYS = ('semantics', 'arr_0', 'pred')
 
@@ -48,18 +50,6 @@ def _uint8_grid(pred, name: str) -> np.ndarray:
         raise ValueError(f'{name}: labels {array.min()}..{array.max()} do '
                          'not fit in uint8.')
     return array.astype(np.uint8)
-
-
-def safe_file_name(value: str, what: str) -> str:
-    """``value`` if it can be a file name inside the output folder.
-
-    Raises:
-        ValueError: If it is empty or holds a path separator or ``..``.
-    """
-    value = str(value)
-    if not value or value in ('.', '..') or '/' in value or '\\' in value:
-        raise ValueError(f'{what} {value!r} cannot name a prediction file.')
-    return value
 
 
 def write_occ3d_prediction(folder: str, sample_token: str, pred) -> str:

@@ -1,5 +1,7 @@
 """RayIoU (SparseOcc's ray-based metric) as an mmengine metric."""
 import hashlib
+import logging
+import math
 import os
 import os.path as osp
 import tempfile
@@ -11,10 +13,21 @@ from mmengine.evaluator import BaseMetric
 from mmengine.logging import print_log
 
 from ..datasets.nuscenes_classes import OCC3D_CLASS_NAMES
+from ..fileio.input_files import MAX_INPUT_BYTES, check_input_file
 from .ray_casting import RAY_PC_RANGE, RAY_VOXEL_SIZE, RayHits, cast_rays
 from .ray_iou import (RAY_IOU_THRESHOLDS, count_ray_hits, ray_iou_from_counts,
                       to_numpy)
-from .ray_origins import load_ray_origins
+from .ray_origins import info_path, load_origin_frames
+
+
+def _hits_digest(hits: RayHits) -> str:
+    """SHA-1 of the cached arrays (dtypes, shapes and bytes)."""
+    digest = hashlib.sha1()
+    for array in hits:
+        array = np.ascontiguousarray(array)
+        digest.update(repr((array.dtype.str, array.shape)).encode())
+        digest.update(array.tobytes())
+    return digest.hexdigest()
 
 
 @METRICS.register_module(name='OccRayIoUMetric')
@@ -48,7 +61,12 @@ class RayIoUMetric(BaseMetric):
     training run) cast the prediction alone; with ``gt_cache_dir`` it is
     kept on disk instead, across runs. Entries are keyed by a hash of the
     GT grid, the origins and the protocol, so a changed label is never
-    served stale.
+    served stale; a file holds its key and a digest of its hits, so one
+    replaced or damaged on disk is cast again (with a warning naming it).
+
+    Origins read from ``ann_file`` belong to the sample of the same token
+    there: a sample whose packed ``timestamp`` or ``ego2global`` differs
+    (the dataloader's roots overridden, the metric's not) is refused.
 
     Args:
         ann_file (str, optional): Info file of the evaluated split, for
@@ -114,6 +132,7 @@ class RayIoUMetric(BaseMetric):
         self.cache_gt_rays = bool(cache_gt_rays) or gt_cache_dir is not None
         self._gt_cache: Dict[str, RayHits] = {}
         self._origins_by_token: Optional[Dict[str, np.ndarray]] = None
+        self._frames_by_token: Dict[str, tuple] = {}
 
     def process(self, data_batch, data_samples: Sequence[dict]) -> None:
         """Cast the rays of a batch and store their counts.
@@ -179,15 +198,48 @@ class RayIoUMetric(BaseMetric):
                 f'RayIoUMetric: sample {name} has no ray_origins; give the '
                 'metric the ann_file (and data_root) of the split.')
         if self._origins_by_token is None:
-            self._origins_by_token = load_ray_origins(self.ann_file,
-                                                      self.data_root)
+            self._origins_by_token, self._frames_by_token = \
+                load_origin_frames(self.ann_file, self.data_root)
         token = sample.get('token')
         if token not in self._origins_by_token:
             raise ValueError(
                 f'RayIoUMetric: sample {name} (token {token!r}) is not in '
                 f'{self.ann_file}; give the info file of the evaluated '
                 'split.')
+        self._check_same_frame(sample, name, token)
         return self._origins_by_token[token]
+
+    def _check_same_frame(self, sample: dict, name, token: str) -> None:
+        """Refuse origins of another dataset's sample of the same token.
+
+        The metric reads the origins from its own ``data_root`` /
+        ``ann_file``, which a config states once; a run whose dataloader
+        roots are overridden (``--cfg-options``) evaluated another dataset
+        with these origins. The sample's packed ``timestamp`` and
+        ``ego2global`` must be those of the info file's entry (samples
+        without them cannot be checked).
+
+        Raises:
+            ValueError: Naming the sample, the info file and what differs.
+        """
+        timestamp, ego2global = self._frames_by_token[token]
+        theirs = sample.get('ego2global')
+        differs = []
+        if sample.get('timestamp') is not None and not math.isclose(
+                float(sample['timestamp']), timestamp, abs_tol=1e-6):
+            differs.append(f'timestamp {sample["timestamp"]} vs {timestamp}')
+        if theirs is not None and not np.allclose(
+                to_numpy(theirs).astype(np.float64).reshape(4, 4),
+                ego2global, atol=1e-4):
+            differs.append('ego2global')
+        if differs:
+            raise ValueError(
+                f'RayIoUMetric: sample {name} is not the sample of token '
+                f'{token} in {info_path(self.ann_file, self.data_root)} '
+                f'({", ".join(differs)} differ): the metric would cast '
+                "rays from another dataset's origins. Set the metric's "
+                "data_root and ann_file to the evaluated dataset's (an "
+                'override of the dataloader roots does not change them).')
 
     def _cache_key(self, gt: np.ndarray, origins: np.ndarray) -> str:
         """Hash of everything the GT's ray hits depend on."""
@@ -207,8 +259,25 @@ class RayIoUMetric(BaseMetric):
         path = osp.join(self.gt_cache_dir, f'{key}.npz')
         if not osp.isfile(path):
             return None
-        with np.load(path) as data:
-            return RayHits(data['label'], data['depth'])
+        problem = None
+        try:
+            check_input_file(path, 'RayIoU GT cache file',
+                             MAX_INPUT_BYTES['label'])
+            with np.load(path, allow_pickle=False) as data:
+                hits = RayHits(data['label'], data['depth'])
+                stored = (str(data['key']), str(data['digest']))
+        except (OSError, ValueError, KeyError) as err:
+            problem = f'{type(err).__name__}: {err}'
+        else:
+            if stored != (key, _hits_digest(hits)):
+                problem = ('its content is not the GT rays of this sample '
+                           '(replaced or damaged)')
+        if problem is not None:
+            print_log(f'RayIoUMetric: ignoring the cache file {path} '
+                      f'({problem}); the GT rays are cast again.',
+                      logger='current', level=logging.WARNING)
+            return None
+        return hits
 
     def _store(self, key: Optional[str], hits: RayHits) -> None:
         """Cache the GT hits under ``key`` (memory, or an atomic file)."""
@@ -223,7 +292,10 @@ class RayIoUMetric(BaseMetric):
         # Written aside and renamed: ranks never read a half-written file.
         fd, tmp = tempfile.mkstemp(suffix='.npz', dir=self.gt_cache_dir)
         with os.fdopen(fd, 'wb') as f:
-            np.savez(f, label=hits.label, depth=hits.depth)
+            # The key and a digest of the hits: a file replaced or damaged
+            # later is recognised and cast again (_cached).
+            np.savez(f, label=hits.label, depth=hits.depth,
+                     key=np.array(key), digest=np.array(_hits_digest(hits)))
         os.replace(tmp, osp.join(self.gt_cache_dir, f'{key}.npz'))
 
     def compute_metrics(self, results: list) -> Dict[str, float]:

@@ -14,7 +14,7 @@ this needs for every key frame: ``token``, ``timestamp``, ``scene_token``
 """
 import os.path as osp
 from collections import defaultdict
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -120,10 +120,17 @@ def scene_ray_origins(data_list: Sequence[dict],
     return origins
 
 
-def load_ray_origins(ann_file: str,
-                     data_root: Optional[str] = None
-                     ) -> Dict[str, np.ndarray]:
-    """:func:`scene_ray_origins` of every sample of an info file.
+def info_path(ann_file: str, data_root: Optional[str] = None) -> str:
+    """``ann_file`` below ``data_root`` unless it is absolute."""
+    if data_root and not osp.isabs(ann_file):
+        return osp.join(data_root, ann_file)
+    return ann_file
+
+
+def load_origin_frames(ann_file: str,
+                       data_root: Optional[str] = None
+                       ) -> Tuple[Dict[str, np.ndarray], Dict[str, tuple]]:
+    """:func:`scene_ray_origins` of an info file, and each sample's frame.
 
     Args:
         ann_file (str): Info file written by ``tools/create_data.py``,
@@ -132,13 +139,28 @@ def load_ray_origins(ann_file: str,
             Defaults to None.
 
     Returns:
-        dict[str, np.ndarray]: Sample token to origins. Shape (T, 3) each.
+        tuple[dict, dict]: Sample token to origins (Shape (T, 3) each),
+        and sample token to ``(timestamp, ego2global)`` (Shape (4, 4)),
+        by which a sample of the evaluated dataset is matched with the
+        entry its origins come from.
     """
-    path = ann_file
-    if data_root and not osp.isabs(path):
-        path = osp.join(data_root, path)
+    path = info_path(ann_file, data_root)
     if not osp.isfile(path):
         raise FileNotFoundError(f'ray origins: info file not found: {path}')
     infos = load_info_file(path)
     check_info_file(infos, path)
-    return scene_ray_origins(infos['data_list'])
+    frames = {
+        entry['token']: (entry['timestamp'],
+                         np.asarray(entry['ego2global'],
+                                    np.float64).reshape(4, 4))
+        for entry in infos['data_list']
+    }
+    return scene_ray_origins(infos['data_list']), frames
+
+
+def load_ray_origins(ann_file: str,
+                     data_root: Optional[str] = None
+                     ) -> Dict[str, np.ndarray]:
+    """The origins of :func:`load_origin_frames` alone: sample token to
+    origins, Shape (T, 3) each."""
+    return load_origin_frames(ann_file, data_root)[0]

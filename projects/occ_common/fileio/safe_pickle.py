@@ -47,6 +47,12 @@ registers, and with nothing else; the class-level registry of statistic
 methods, which ``HistoryBuffer.__setstate__`` updates from the file, is
 restored after every load, so a file cannot leave a method behind.
 
+Checkpoints in torch's zip format are first checked record by record
+against their CRC-32 (:mod:`.zip_integrity`), and the config text that
+mmengine would run as code is removed from every checkpoint returned
+(:mod:`.checkpoint_meta`): a plain string is nothing the unpickler can
+refuse.
+
 mmengine's ``CheckpointLoader`` (``load_from``, ``--resume``,
 ``init_cfg=dict(type='Pretrained')``, every URL scheme) is pointed at
 :func:`load_checkpoint_file` by :func:`install_checkpoint_loader`
@@ -69,7 +75,9 @@ import torch
 
 from . import safe_numpy
 from .checkpoint_format import LEGACY, TORCHSCRIPT, ZIP, checkpoint_format
+from .checkpoint_meta import drop_config_text
 from .safe_numpy import UnsafeArrayError, numpy_core
+from .zip_integrity import DamagedRecordError, check_zip_records
 
 
 class RefusedGlobalError(pickle.UnpicklingError):
@@ -406,7 +414,8 @@ def load_checkpoint_file(filename: str,
             for :func:`torch.load`. Defaults to None.
 
     Returns:
-        dict: The checkpoint.
+        dict: The checkpoint, without config text
+        (:func:`~.checkpoint_meta.drop_config_text`).
 
     Raises:
         FileNotFoundError: If ``filename`` is not a file.
@@ -414,7 +423,8 @@ def load_checkpoint_file(filename: str,
             a global outside the allow-list or a numpy object numpy would
             build unsafely; the message names the file and what was
             refused, and nothing from it was executed.
-        CorruptFileError: If it is empty, truncated or not a checkpoint.
+        CorruptFileError: If it is empty, truncated, not a checkpoint, or
+            a record of its zip archive does not match its CRC-32.
     """
     filename = osp.expanduser(filename)
     _check_file(filename, 'checkpoint')
@@ -427,8 +437,11 @@ def load_checkpoint_stream(file: BinaryIO,
                            map_location: MapLocation = None) -> Any:
     """:func:`load_checkpoint_file` of an open file (a download in memory).
 
-    The format is checked on the same open file that ``torch.load`` then
-    reads, so the file checked is the file loaded.
+    The format and, for torch's zip format, every record's CRC-32
+    (:mod:`.zip_integrity`) are checked on the same open file that
+    ``torch.load`` then reads, so the file checked is the file loaded.
+    The config text mmengine would run as code is removed from what is
+    returned (:mod:`.checkpoint_meta`).
 
     Args:
         file (BinaryIO): Seekable, at its start.
@@ -455,6 +468,20 @@ def load_checkpoint_stream(file: BinaryIO,
         raise CorruptFileError(
             f'checkpoint {name} is truncated or not a torch checkpoint '
             f'({detail}).')
+    if kind == ZIP:
+        try:
+            check_zip_records(file, name)
+        except DamagedRecordError as err:
+            raise CorruptFileError(str(err)) from None
+    checkpoint = _torch_load(file, name, map_location)
+    drop_config_text(checkpoint, name)
+    return checkpoint
+
+
+def _torch_load(file: BinaryIO, name: str,
+                map_location: MapLocation) -> Any:
+    """``torch.load`` through :data:`CHECKPOINT_PICKLE`, its failures as
+    the errors of :func:`load_checkpoint_stream`."""
     try:
         return torch.load(
             file,

@@ -37,6 +37,7 @@ from typing import Optional, Sequence, Tuple
 import cv2
 import numpy as np
 
+from ..fileio.safe_names import safe_file_name
 from .camera import CAMERA_NAMES, make_camera_rig
 from .layout import build_world
 from .lidar import make_lidar2ego
@@ -78,6 +79,7 @@ def load_world(out_dir: str, scene_name: str) -> World:
     Raises:
         FileNotFoundError: If the scene's world file is missing.
     """
+    scene_name = safe_file_name(scene_name, 'scene name')
     path = osp.join(out_dir, 'synthetic_gt', 'worlds', f'{scene_name}.json')
     if not osp.isfile(path):
         raise FileNotFoundError(
@@ -153,6 +155,7 @@ def _write_map(out_dir: str, token: str, world, reach: float) -> str:
     scale = int(round(coarse / fine))
     prior = cv2.resize(prior, (size * scale, size * scale),
                        interpolation=cv2.INTER_NEAREST)
+    token = safe_file_name(token, 'map token')
     filename = osp.join('maps', f'{token}.png')
     cv2.imwrite(osp.join(out_dir, filename), prior)
     return filename

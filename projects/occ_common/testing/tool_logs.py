@@ -25,7 +25,7 @@ def last_test_metrics(work_dir: str, prefix: str = 'occ/') -> Dict:
     Returns:
         dict: The last record holding ``{prefix}mIoU``.
     """
-    logs = sorted(glob.glob(osp.join(work_dir, '*', '*.json')))
+    logs = sorted(glob.glob(osp.join(glob.escape(work_dir), '*', '*.json')))
     if not logs:
         raise FileNotFoundError(f'no json log under {work_dir}')
     with open(logs[-1]) as f:
@@ -54,7 +54,8 @@ def train_losses(work_dir: str) -> List[float]:
 
     Read from the newest run's ``vis_data/*.json`` scalars of ``work_dir``.
     """
-    logs = sorted(glob.glob(osp.join(work_dir, '*', 'vis_data', '*.json')))
+    logs = sorted(
+        glob.glob(osp.join(glob.escape(work_dir), '*', 'vis_data', '*.json')))
     if not logs:
         raise FileNotFoundError(f'no scalars json under {work_dir}')
     with open(logs[-1]) as f:

@@ -1,8 +1,9 @@
 """Loading of the multi-view camera images and their calibration.
 
-Every check names the file and what was expected: an empty, truncated or
-undecodable image, a non-finite matrix, or an image whose size is not the
-one its calibration belongs to.
+Every check names the file and what was expected: a path that is no
+regular file or too large, an empty, truncated or undecodable image, a
+non-finite matrix, or an image whose size is not the one its calibration
+belongs to. EXIF orientation tags are ignored (:func:`decode_flag`).
 """
 from typing import Optional, Sequence
 
@@ -49,6 +50,29 @@ def check_complete_image(raw: bytes, path: str, what: str) -> None:
     if raw[:8] == b'\x89PNG\r\n\x1a\n' and b'IEND' not in raw[-12:]:
         raise ValueError(f'{what} is a truncated PNG ({len(raw)} bytes, no '
                          f'IEND chunk at its end): {path}')
+
+
+def decode_flag(color_type: str) -> str:
+    """The ``mmcv.imfrombytes`` flag of ``color_type``, EXIF orientation
+    ignored.
+
+    OpenCV's ``IMREAD_COLOR`` / ``IMREAD_GRAYSCALE`` rotate or mirror a
+    JPEG whose EXIF orientation tag says so, so the decoded pixels were
+    no longer those the camera's ``cam2img`` describes (a calibration is
+    of the sensor's pixel grid, which is how the file stores them;
+    nuScenes' images carry no tag). The pixels are decoded as stored,
+    which is also what mmdet3d's ``color_type='unchanged'`` does.
+
+    Args:
+        color_type (str): ``'color'``, ``'grayscale'``, ``'unchanged'`` or
+            a ``*_ignore_orientation`` flag of mmcv.
+
+    Returns:
+        str: The flag to decode with.
+    """
+    if color_type in ('color', 'grayscale'):
+        return f'{color_type}_ignore_orientation'
+    return color_type
 
 
 def _calibrated_size(info: dict, img_shape, cam2img: np.ndarray, where: str,
@@ -106,7 +130,8 @@ class LoadMultiViewImagesOcc(BaseTransform):
             Defaults to the order of ``results['images']``.
         to_float32 (bool): Convert images to float32. Defaults to False.
         color_type (str): ``mmcv.imfrombytes`` flag. Defaults to 'color'
-            (BGR uint8; the data preprocessor converts to RGB).
+            (BGR uint8; the data preprocessor converts to RGB). An EXIF
+            orientation tag is ignored (:func:`decode_flag`).
         backend_args (dict, optional): mmengine file backend arguments.
         scale_calibration (bool): For an image whose size differs from the
             ``height`` / ``width`` its info records (images resized after
@@ -159,10 +184,11 @@ class LoadMultiViewImagesOcc(BaseTransform):
             info = results['images'][cam]
             path = info['img_path']
             what = f'{cam} image of sample {token}'
-            raw = read_bytes(path, what, self.backend_args)
+            raw = read_bytes(path, what, self.backend_args, 'image')
             check_complete_image(raw, path, what)
             try:
-                img = mmcv.imfrombytes(raw, flag=self.color_type)
+                img = mmcv.imfrombytes(
+                    raw, flag=decode_flag(self.color_type))
             except Exception as err:  # noqa: BLE001 - cv2.error and kin
                 raise ValueError(f'{what} cannot be decoded ({err}): '
                                  f'{path}') from None

@@ -3,24 +3,49 @@
 Every loader checks what it reads and raises an error that names the file
 and what was expected, instead of failing later inside numpy.
 """
-import io
 from typing import Optional
 
 import numpy as np
 from mmcv.transforms import BaseTransform
 from mmdet3d.registry import TRANSFORMS
-from mmengine.fileio import get
 
 from ..datasets.nuscenes_classes import OCC_CLASS_NAMES, lidarseg_to_occ16
 from ..datasets.occ_formats import IGNORE_INDEX, OCC_FORMATS
+from ..fileio.input_files import (MAX_INPUT_BYTES, load_npy, load_npz_arrays,
+                                  read_input_bytes)
 
 
-def read_bytes(path: str, what: str, backend_args: Optional[dict]) -> bytes:
-    """The bytes of ``path``; a missing file is named with ``what``."""
-    try:
-        return get(path, backend_args=backend_args)
-    except FileNotFoundError:
-        raise FileNotFoundError(f'{what} not found: {path}') from None
+def read_bytes(path: str,
+               what: str,
+               backend_args: Optional[dict],
+               kind: str = 'label') -> bytes:
+    """The bytes of ``path``: a regular file within the size limit of its
+    ``kind`` (:data:`~projects.occ_common.fileio.input_files.
+    MAX_INPUT_BYTES`); anything else is named with ``what``."""
+    return read_input_bytes(path, what, MAX_INPUT_BYTES[kind], backend_args)
+
+
+def _surroundocc_rows(shape: tuple, dtype: np.dtype) -> Optional[str]:
+    """What is wrong with a SurroundOcc label's declared array, or None."""
+    if len(shape) != 2 or shape[1] != 4 or dtype.kind not in 'iu':
+        return 'expected an integer (M, 4) array of x, y, z, label rows'
+    return None
+
+
+def _occ3d_array(grid: tuple):
+    """The check of an Occ3D label's declared arrays (see ``_occ3d``)."""
+
+    def check(name: str, shape: tuple, dtype: np.dtype) -> Optional[str]:
+        # Class indices must be integers: boolean semantics would pass as
+        # classes 0 / 1. The masks may be either.
+        kinds = 'iu' if name == 'semantics' else 'iub'
+        if shape != grid or dtype.kind not in kinds or dtype.itemsize > 8:
+            return (f'{name} must be an integer '
+                    f'{"" if name == "semantics" else "or bool "}array of '
+                    f'shape {grid}')
+        return None
+
+    return check
 
 
 @TRANSFORMS.register_module()
@@ -80,17 +105,8 @@ class LoadOccupancyGT(BaseTransform):
     def _surroundocc(self, raw: bytes, path: str, grid) -> dict:
         if not raw:
             raise ValueError(f'SurroundOcc label {path} is empty (0 bytes)')
-        try:
-            arr = np.load(io.BytesIO(raw), allow_pickle=False)
-        except Exception as err:  # noqa: BLE001 - EOFError, ValueError ...
-            raise ValueError(
-                f'SurroundOcc label {path} is truncated or not a .npy array '
-                f'({type(err).__name__}: {err})') from None
-        if arr.ndim != 2 or arr.shape[1] != 4 \
-                or not np.issubdtype(arr.dtype, np.integer):
-            raise ValueError(
-                f'SurroundOcc label {path}: expected an integer (M, 4) array '
-                f'of x, y, z, label rows, got {arr.dtype} {arr.shape}')
+        # The declared shape is checked before numpy allocates it.
+        arr = load_npy(raw, path, 'SurroundOcc label', _surroundocc_rows)
         xyz, label = arr[:, :3], arr[:, 3]
         if len(arr) and ((xyz < 0).any() or (xyz >= grid).any()
                          or label.min() < 0
@@ -108,31 +124,10 @@ class LoadOccupancyGT(BaseTransform):
     def _occ3d(self, raw: bytes, path: str, grid) -> dict:
         if not raw:
             raise ValueError(f'Occ3D label {path} is empty (0 bytes)')
-        try:
-            npz = np.load(io.BytesIO(raw), allow_pickle=False)
-            arrays = {k: npz[k] for k in npz.files}
-        except Exception as err:  # noqa: BLE001 - BadZipFile (CRC), EOF ...
-            raise ValueError(
-                f'Occ3D label {path} is truncated, corrupt or not an .npz '
-                f'archive ({type(err).__name__}: {err})') from None
-        out = {}
-        for key in ('semantics', 'mask_lidar', 'mask_camera'):
-            if key not in arrays:
-                raise ValueError(f'Occ3D label {path}: expected the arrays '
-                                 "semantics, mask_lidar, mask_camera, got "
-                                 f'{sorted(arrays)}')
-            arr = arrays[key]
-            # Class indices must be integers: boolean semantics would pass
-            # as classes 0 / 1. The masks may be either.
-            kinds = 'an integer' if key == 'semantics' else \
-                'an integer or bool'
-            if arr.shape != grid or not (
-                    np.issubdtype(arr.dtype, np.integer) or
-                    (arr.dtype == np.bool_ and key != 'semantics')):
-                raise ValueError(
-                    f'Occ3D label {path}: {key} must be {kinds} array of '
-                    f'shape {grid}, got {arr.dtype} {arr.shape}')
-            out[key] = arr
+        # Shapes and sizes are checked before anything is decompressed.
+        out = load_npz_arrays(raw, path, 'Occ3D label',
+                              ('semantics', 'mask_lidar', 'mask_camera'),
+                              _occ3d_array(grid))
         sem = out['semantics']
         if sem.size and (sem.min() < 0 or sem.max() > 17):
             raise ValueError(f'Occ3D label {path}: semantics must lie in '

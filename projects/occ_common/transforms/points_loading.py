@@ -20,9 +20,9 @@ import numpy as np
 from mmdet3d.datasets.transforms import (LoadPointsFromFile,
                                          LoadPointsFromMultiSweeps)
 from mmdet3d.registry import TRANSFORMS
-from mmengine.fileio import get
 
 from ..datasets.info_format import NUM_POINT_FEATS
+from ..fileio.input_files import MAX_INPUT_BYTES, read_input_bytes
 from .ego_points import check_ego_box, remove_ego_from_sweep
 
 #: Files already warned about (one warning per file and process).
@@ -109,14 +109,15 @@ def read_points_file(path: str,
 
     Raises:
         FileNotFoundError: The file does not exist.
-        ValueError: Its size is not a whole number of points, or its ring
-            column holds no ring indices (another dtype or point width).
+        ValueError: It is no regular file or larger than
+            ``MAX_INPUT_BYTES['points']``, its size is not a whole number
+            of points, or its ring column holds no ring indices (another
+            dtype or point width).
     """
-    try:
-        raw = get(path, backend_args=backend_args)
-    except FileNotFoundError:
-        raise FileNotFoundError(
-            f'{what} file not found: {path}') from None
+    # A regular file within the size limit: a device or FIFO would never
+    # end or block.
+    raw = read_input_bytes(path, f'{what} file', MAX_INPUT_BYTES['points'],
+                           backend_args)
     point_bytes = 4 * load_dim
     if len(raw) % point_bytes:
         raise ValueError(

@@ -12,6 +12,7 @@ from typing import Optional, Sequence
 import numpy as np
 import torch
 
+from ..fileio.safe_names import safe_file_name
 from .occ_figure import render_occ_figure
 from .orientation import sample_forward
 
@@ -23,15 +24,8 @@ def sample_field(sample, key: str, default=None):
     return getattr(sample, key, default)
 
 
-def _file_safe(value) -> str:
-    """``value`` as text with every character but ``[A-Za-z0-9-_.]`` as
-    ``_``."""
-    return ''.join(ch if ch.isalnum() or ch in '-_.' else '_'
-                   for ch in str(value))
-
-
-def sample_name(sample, fallback: str) -> str:
-    """A file-name-safe name of a sample, unique within a dataset.
+def sample_label(sample, fallback: str) -> str:
+    """The name of a sample as its metainfo gives it, for titles.
 
     ``<scene_name>_<token>`` when the metainfo has both (the packed nuScenes
     and synthetic samples: ``scene-0061_ca9a282c9e77460f8360f564131a8af5``),
@@ -43,15 +37,31 @@ def sample_name(sample, fallback: str) -> str:
         fallback (str): The name of a sample that carries none.
 
     Returns:
-        str: The name.
+        str: The name, unchecked (see :func:`sample_name` for files).
     """
     token = sample_field(sample, 'token')
     if token is not None:
         scene = sample_field(sample, 'scene_name')
-        name = str(token) if scene is None else f'{scene}_{token}'
-        return _file_safe(name)
+        return str(token) if scene is None else f'{scene}_{token}'
     index = sample_field(sample, 'sample_idx')
-    return fallback if index is None else _file_safe(index)
+    return fallback if index is None else str(index)
+
+
+def sample_name(sample, fallback: str) -> str:
+    """:func:`sample_label` as a file name, unique within a dataset.
+
+    Args:
+        sample (BaseDataElement | dict): A data sample or a dict.
+        fallback (str): The name of a sample that carries none.
+
+    Returns:
+        str: The name.
+
+    Raises:
+        ValueError: If the token or scene name cannot name a file
+            (:func:`~projects.occ_common.fileio.safe_names.safe_file_name`).
+    """
+    return safe_file_name(sample_label(sample, fallback), 'sample name')
 
 
 def camera_images(img, bgr: bool = True) -> np.ndarray:
@@ -121,7 +131,7 @@ def render_data_sample(sample,
     """
     pred = sample_field(sample, 'pred_occ') if draw_pred else None
     gt = sample_field(sample, 'gt_occ') if draw_gt else None
-    name = sample_name(sample, '?')
+    name = sample_label(sample, '?')
     if pred is None and gt is None:
         raise ValueError(f'Sample {name} has no pred_occ or gt_occ to draw '
                          f'(draw_pred={draw_pred}, draw_gt={draw_gt}).')

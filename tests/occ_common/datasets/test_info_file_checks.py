@@ -187,3 +187,60 @@ def test_metainfo_argument_must_be_a_dict(world_copy):
     ds_cfg.update(data_root=world_copy, metainfo=['classes'])
     with pytest.raises(TypeError, match=f'{TRAIN}: metainfo must be a dict'):
         DATASETS.build(ds_cfg)
+
+
+def _sweep(i):
+    return i['data_list'][1]['lidar_sweeps'][0]
+
+
+@pytest.mark.parametrize('edit, msg', [
+    (lambda i: i['data_list'][1].update(timestamp=float('nan')),
+     'timestamp: expected a finite number of seconds, got nan'),
+    (lambda i: _sweep(i).update(timestamp=i['data_list'][1]['timestamp'] +
+                                0.05),
+     r'lidar_sweeps\[0\]: the sweep is time-stamped 0.050 s after its key '
+     'frame'),
+    (lambda i: _sweep(i)['lidar_points'].update(
+        sensor2lidar=np.zeros((4, 4)).tolist()),
+     r'lidar_sweeps\[0\].lidar_points.sensor2lidar: expected a rigid '
+     'transform'),
+    (lambda i: i['data_list'][1]['images']['CAM_BACK'].update(
+        cam2ego=(2 * np.eye(4)).tolist()),
+     'images.CAM_BACK.cam2ego: expected a rigid transform'),
+])
+def test_times_and_transforms_are_checked(world_copy, edit, msg):
+    """A NaN timestamp (NaN time lags), a sweep after its key frame (a
+    negative time lag), an all-zero sensor2lidar (every sweep point at the
+    origin), a scaled cam2ego: each was accepted without a word."""
+    infos = rewrite(world_copy, edit)
+    token = infos['data_list'][1]['token']
+    with pytest.raises(ValueError, match=f'{TRAIN}: sample {token} .*{msg}'):
+        build(world_copy)
+
+
+@pytest.mark.parametrize('shift, msg', [
+    (+0.6, 'the previous key frame is time-stamped -0.1.. s before'),
+    (-2.0, 'the previous key frame is time-stamped 2.5.. s before'),
+])
+def test_previous_key_frame_lies_in_the_past_within_two_seconds(
+        world_copy, shift, msg):
+    """Key frame 1's link to key frame 0, 0.5 s before it, moved 0.6 s
+    later (0.1 s in the future: a temporal model fused the next frame as
+    the last one) or 2 s earlier (2.5 s: no consecutive key frame)."""
+    def edit(infos):
+        link = infos['data_list'][1]['prev_key_frame']
+        link['timestamp'] += shift
+
+    infos = rewrite(world_copy, edit)
+    token = infos['data_list'][1]['token']
+    cfg = Config.fromfile(
+        osp.join(REPO, 'configs', '_base_', 'datasets', 'surroundocc-nus.py'))
+    ds_cfg = cfg.train_dataloader.dataset
+    ds_cfg.update(data_root=world_copy, ann_file=TRAIN, num_frames=2)
+    with pytest.raises(ValueError, match=f'{TRAIN}: sample {token} frame '
+                       f't-1: {msg}'):
+        DATASETS.build(ds_cfg)
+    # The converter's link: key frame 0's own timestamp.
+    rewrite(world_copy, lambda i: i['data_list'][1]['prev_key_frame'].update(
+        timestamp=i['data_list'][0]['timestamp']))
+    assert len(DATASETS.build(ds_cfg)) == 2

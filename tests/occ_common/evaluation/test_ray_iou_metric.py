@@ -1,5 +1,6 @@
 """Tests of RayIoUMetric (OccRayIoUMetric) on tiny hand-made batches."""
 import math
+import os
 import pickle
 from unittest import mock
 
@@ -159,3 +160,54 @@ def test_metric_of_no_samples_is_nan():
                     'print_log'):
         metrics = RayIoUMetric(**TINY).compute_metrics([])
     assert math.isnan(metrics['RayIoU']) and math.isnan(metrics['RayIoU@2'])
+
+
+def test_origins_of_another_dataset_are_refused(tmp_path):
+    """The metric reads t0's origins from its own info file; a sample of
+    the evaluated dataset with the same token but another ego pose or
+    time (the dataloader's data_root overridden, the metric's not) is
+    refused naming the file (before: scored with these origins). The
+    sample of the file itself passes."""
+    entries = _info_file(tmp_path / 'infos.pkl')
+    metric = RayIoUMetric(ann_file='infos.pkl', data_root=str(tmp_path),
+                          **TINY)
+    own = _sample(CAR, token='t0', origins=None)
+    own.update(timestamp=0.0, ego2global=np.asarray(
+        entries[0]['ego2global'], np.float32))
+    metric.process({}, [own])
+    moved = dict(own, ego2global=np.eye(4, dtype=np.float32) * 1.0)
+    moved['ego2global'][1, 3] = 5.0
+    with pytest.raises(ValueError, match=r'sample t0 is not the sample of '
+                       r'token t0 in .*infos\.pkl \(ego2global differ\): '
+                       "the metric would cast rays from another dataset's"):
+        metric.process({}, [moved])
+    with pytest.raises(ValueError, match=r'\(timestamp 7.0 vs 0.0 differ\)'):
+        metric.process({}, [dict(own, timestamp=7.0)])
+
+
+@pytest.mark.parametrize('damage', ['another sample', 'garbage'])
+def test_replaced_cache_file_is_cast_again(tmp_path, damage):
+    """The cache file of sample A replaced by that of sample B (same
+    origins, GT truck: another key's file) or by bytes that are no .npz:
+    the GT is cast again with a warning naming the file, and the counts
+    are A's (before: B's hits were read as A's; a damaged file gave
+    NaN)."""
+    cache = tmp_path / 'cache'
+    metric = RayIoUMetric(gt_cache_dir=str(cache), **TINY)
+    metric.process({}, [_sample(CAR, gt=CAR, token='a')])
+    metric.process({}, [_sample(CAR, gt=TRUCK, token='b')])
+    file_a, file_b = sorted(cache.glob('*.npz'), key=os.path.getmtime)
+    if damage == 'garbage':
+        file_a.write_bytes(b'not an npz')
+    else:
+        file_a.write_bytes(file_b.read_bytes())
+    again = RayIoUMetric(gt_cache_dir=str(cache), **TINY)
+    with mock.patch('projects.occ_common.evaluation.ray_iou_metric.'
+                    'print_log') as log, mock.patch(
+                        CAST, wraps=metric._cast.__globals__['cast_rays']) \
+            as cast:
+        again.process({}, [_sample(CAR, gt=CAR, token='a')])
+    assert f'ignoring the cache file {file_a}' in log.call_args[0][0]
+    assert len(cast.call_args.args[0]) == 2  # prediction and GT
+    for key in ('gt', 'pred', 'tp'):
+        assert np.array_equal(again.results[0][key], metric.results[0][key])

@@ -9,6 +9,7 @@ import os.path as osp
 import warnings
 from typing import List, Optional
 
+from ...fileio.safe_names import safe_file_name
 from .report import ConversionReport
 
 
@@ -56,7 +57,9 @@ def occ_label_paths(root: str, surroundocc_root: Optional[str],
         if exists_or_report(path, 'SurroundOcc label', token, report):
             paths['occ_surroundocc_path'] = rel_path(path, root)
     if occ3d_root is not None:
-        path = osp.join(occ3d_root, str(scene_name), token, 'labels.npz')
+        path = osp.join(occ3d_root,
+                        safe_file_name(scene_name, 'scene name'),
+                        safe_file_name(token, 'sample token'), 'labels.npz')
         if exists_or_report(path, 'Occ3D label', token, report):
             paths['occ_occ3d_path'] = rel_path(path, root)
     return paths

@@ -15,10 +15,12 @@ from .occ_visualization_hook import OccVisualizationHook
 from .random_state_hook import RandomStateHook
 from .safe_checkpoint_hook import SafeCheckpointHook
 from .weights_only_checkpoint_hook import WeightsOnlyCheckpointHook
+from .work_dir_lock_hook import WorkDirLockHook
 
 __all__ = [
     'AugmentationSeedHook', 'CheckpointMatchHook',
     'CheckpointRecoveryHook', 'CPUMallocTuningHook', 'MainProcessLoggerHook',
     'NonFiniteLossError', 'NonFiniteLossHook', 'OccVisualizationHook',
-    'RandomStateHook', 'SafeCheckpointHook', 'WeightsOnlyCheckpointHook'
+    'RandomStateHook', 'SafeCheckpointHook', 'WeightsOnlyCheckpointHook',
+    'WorkDirLockHook'
 ]

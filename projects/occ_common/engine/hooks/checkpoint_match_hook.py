@@ -21,6 +21,7 @@ from mmengine.model import is_model_wrapper
 from ...fileio.checkpoint_schemes import install_checkpoint_loader
 from ..checkpoint_check import (EVALUATE, FINE_TUNE, RESUME,
                                 check_checkpoint_state)
+from ..resume_checks import kept_schedule_ends, resumed_state_changes
 
 
 def loaded_file(runner) -> str:
@@ -76,7 +77,9 @@ class CheckpointMatchHook(Hook):
         install_checkpoint_loader()
 
     def after_load_checkpoint(self, runner, checkpoint: dict) -> None:
-        """Refuse NaN / inf weights and, unless allowed, other keys.
+        """Refuse NaN / inf weights and, unless allowed, other keys; on a
+        resume also optimizer and schedule values that differ from the
+        config's (:mod:`..resume_checks`).
 
         Raises:
             ValueError: Naming the checkpoint and what is wrong.
@@ -102,3 +105,15 @@ class CheckpointMatchHook(Hook):
             model, checkpoint.get('state_dict', checkpoint), source,
             runner.cfg.filename, self.allow_key_mismatch and not resuming,
             hint, consequence)
+        if resuming:
+            for line in kept_schedule_ends(runner, checkpoint):
+                runner.logger.warning(f'--resume: {line}.')
+            changes = resumed_state_changes(runner, checkpoint)
+            if changes:
+                raise ValueError(
+                    f'{source} holds optimizer / schedule values other than '
+                    f'the config\'s, and resuming would restore them over '
+                    f'it, ignoring the config: {"; ".join(changes)}. Resume '
+                    'with the values of the interrupted run, or start a new '
+                    'run from its weights with --cfg-options load_from=PATH '
+                    'to train with the new ones.')

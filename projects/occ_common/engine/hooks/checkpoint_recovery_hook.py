@@ -28,7 +28,6 @@ Before a resume from a named file (``--resume PATH``) it refuses, naming
 the files, if the work dir holds complete checkpoints of later steps than
 ``PATH``'s, which the resumed run would overwrite.
 """
-import glob
 import os
 import os.path as osp
 from typing import List, Optional
@@ -39,7 +38,9 @@ from mmengine.hooks import Hook
 
 from ...fileio.atomic_file_backend import atomic_write, is_temporary_file
 from ...fileio.safe_pickle import load_checkpoint_file
-from ..checkpoint_steps import by_step, checkpoint_steps, name_step
+from ..checkpoint_steps import (by_step, checkpoint_steps, name_step,
+                                step_checkpoints)
+from ..run_lock import process_alive
 
 
 def _same_file(a: str, b: str) -> bool:
@@ -60,10 +61,7 @@ def checkpoint_candidates(folder: str,
         list[str]: Paths, the latest step first (see
         :func:`~projects.occ_common.engine.checkpoint_steps.by_step`).
     """
-    found = [
-        path for path in sorted(glob.glob(osp.join(folder, '*.pth')))
-        if name_step(path) is not None and osp.isfile(path)
-    ]
+    found = step_checkpoints(folder)
     if extra and osp.isfile(extra):
         # The pointer may name a file of the folder by another spelling.
         found = [path for path in found if not _same_file(path, extra)]
@@ -119,9 +117,8 @@ def later_checkpoints(work_dir: str, resume_from: str) -> List[str]:
         list[str]: Their paths, the earliest step first.
     """
     found = [
-        path for path in sorted(glob.glob(osp.join(work_dir, '*.pth')))
-        if name_step(path) is not None and osp.isfile(path)
-        and not _same_file(path, resume_from)
+        path for path in step_checkpoints(work_dir)
+        if not _same_file(path, resume_from)
     ]
     if not osp.isfile(resume_from):  # a URL: only its name can tell
         own = name_step(resume_from)
@@ -140,15 +137,7 @@ def later_checkpoints(work_dir: str, resume_from: str) -> List[str]:
 def _writer_alive(name: str) -> bool:
     """Whether the process that writes temporary file ``name`` runs."""
     pid = int(name.rsplit('.', 3)[1])
-    if pid == os.getpid():
-        return False
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True  # another user's process
-    return True
+    return pid != os.getpid() and process_alive(pid)
 
 
 def repair_work_dir(work_dir: str) -> List[str]:

@@ -7,8 +7,11 @@ leaves no checkpoint at all. :class:`SafeCheckpointHook` runs the same
 logic, but every deletion it asks for is only recorded while the new file
 is written; the new checkpoint is then read back through the restricted
 loader and checked, the ``last_checkpoint`` pointer is replaced atomically,
-and only then are the old files deleted. Whatever is interrupted when, the
-work dir keeps at least one complete checkpoint, and ``--resume``
+and only then are the old files deleted (only files inside the work dir:
+a resumed run's message hub names the previous best checkpoint by its
+old path). ``last_checkpoint`` is never written through a symlink.
+Whatever is interrupted when, the work dir keeps at least one complete
+checkpoint, and ``--resume``
 (:class:`~.checkpoint_recovery_hook.CheckpointRecoveryHook`) finds the
 newest one. A divergence guard raising in ``before_save_checkpoint``
 (:class:`~.non_finite_loss_hook.NonFiniteLossHook`) stops the save before
@@ -50,6 +53,14 @@ class _DeferredRemovals:
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.backend, name)
+
+
+def _inside(path: str, folder: str) -> bool:
+    """Whether local ``path`` lies in ``folder`` (URLs: by prefix)."""
+    if '://' in str(path) or '://' in str(folder):
+        return str(path).startswith(str(folder).rstrip('/') + '/')
+    folder = osp.realpath(folder)
+    return osp.commonpath([osp.realpath(path), folder]) == folder
 
 
 def _real_backend(backend):
@@ -162,6 +173,14 @@ class SafeCheckpointHook(CheckpointHook):
         for path in deferred.paths:
             if path in written:
                 continue
+            if not _inside(path, runner.work_dir):
+                # A resumed message hub names the best checkpoint by the
+                # path it had: a moved or copied work dir, or a forged
+                # checkpoint, would delete a file elsewhere.
+                runner.logger.warning(
+                    f'SafeCheckpointHook: not deleting {path}, which lies '
+                    f'outside the work dir {runner.work_dir}.')
+                continue
             if backend.isfile(path):
                 backend.remove(path)
             elif backend.isdir(path):
@@ -174,6 +193,10 @@ class SafeCheckpointHook(CheckpointHook):
         expected = dict(epoch=meta['epoch'], iter=meta['iter'])
         deferred = _DeferredRemovals(self.file_backend)
         self.file_backend = deferred
+        if is_main_process() and osp.islink(self._pointer(runner)):
+            # mmengine writes the pointer with open(), which would write
+            # through a symlink into its target.
+            os.unlink(self._pointer(runner))
         try:
             super()._save_checkpoint_with_step(runner, step, meta)
         finally:

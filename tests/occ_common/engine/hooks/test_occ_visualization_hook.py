@@ -73,17 +73,21 @@ def test_pictures_are_named_after_scene_and_token(tmp_path):
     """``<scene_name>_<token>.png``, ``<token>.png`` without a scene name,
     ``<sample_idx>.png`` without a token (before: always sample_idx, the
     index in the info file, so 0.png for the first sample of every
-    split)."""
+    split). A token that cannot name a file (``t/1``) is refused, naming
+    it (before: written as ``t_1.png``, which ``t_1`` would overwrite)."""
     token = 'ca9a282c9e77460f8360f564131a8af5'
     hook = OccVisualizationHook(draw=True, test_out_dir='show', **FAST)
     runner = _runner(tmp_path)
     hook.before_test(runner)
     hook.after_test_iter(runner, 0, outputs=_samples(
         0, token=token, scene_name='scene-0061'))
-    hook.after_test_iter(runner, 1, outputs=_samples(1, token='t/1'))
+    hook.after_test_iter(runner, 1, outputs=_samples(1, token='t_1'))
     hook.after_test_iter(runner, 2, outputs=_samples(2))
     assert sorted(os.listdir(tmp_path / 'show')) == [
         '2.png', f'scene-0061_{token}.png', 't_1.png']
+    with pytest.raises(ValueError, match="sample name 't/1' cannot name a "
+                       'file'):
+        hook.after_test_iter(runner, 3, outputs=_samples(3, token='t/1'))
 
 
 def test_interval_and_draw_false(tmp_path):
