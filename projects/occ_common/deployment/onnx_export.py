@@ -48,7 +48,9 @@ def export_graph(module: nn.Module,
             symbolic name, e.g. ``{'points': {0: 'num_points'}}``.
             Defaults to None (all static).
         opset (int, optional): ONNX opset. Defaults to
-            :func:`required_opset`'s.
+            :func:`required_opset`'s, lowered to :data:`DEFAULT_OPSET`
+            when the traced graph holds no ``DeformConv`` (the module's
+            deformable convolutions are not called).
 
     Returns:
         str: ``path``.
@@ -57,7 +59,7 @@ def export_graph(module: nn.Module,
         ValueError: An opset below 19 for a module with deformable
             convolutions (ONNX ``DeformConv``), naming them.
     """
-    needed = required_opset(module)
+    requested, needed = opset, required_opset(module)
     opset = needed if opset is None else int(opset)
     if opset < needed:
         names = deformable_convs(module)
@@ -70,6 +72,26 @@ def export_graph(module: nn.Module,
     module.eval()
     folder = osp.dirname(osp.abspath(path))
     os.makedirs(folder, exist_ok=True)
+    _trace(module, args, path, input_names, output_names, dynamic_axes,
+           opset)
+    if (requested is None and opset > DEFAULT_OPSET
+            and 'DeformConv' not in graph_summary(path)['ops']):
+        # The module holds deformable convolutions its forward does not
+        # call (a graph of one part of a model, as OccCylindrical's plane
+        # graph): traced again at the default opset, which more runtimes
+        # read.
+        opset = DEFAULT_OPSET
+        _trace(module, args, path, input_names, output_names, dynamic_axes,
+               opset)
+    constants_to_initializers(path)
+    return path
+
+
+def _trace(module: nn.Module, args: Sequence[Tensor], path: str,
+           input_names: Sequence[str], output_names: Sequence[str],
+           dynamic_axes: Optional[Mapping], opset: int) -> None:
+    """``torch.onnx.export`` of ``module(*args)`` on the GPU code path, its
+    deformable convolutions as ONNX ``DeformConv``."""
     torch.onnx.register_custom_op_symbolic('aten::hypot', _hypot, opset)
     with torch.no_grad(), forced_accelerator_path(True), \
             exportable_deform_convs(module), warnings.catch_warnings():
@@ -88,8 +110,6 @@ def export_graph(module: nn.Module,
             opset_version=int(opset),
             do_constant_folding=True,
             dynamo=False)
-    constants_to_initializers(path)
-    return path
 
 
 def required_opset(module: nn.Module) -> int:

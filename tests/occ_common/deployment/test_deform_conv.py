@@ -64,3 +64,34 @@ def test_an_opset_without_deform_conv_and_dcn_v1_are_refused(tmp_path):
     with pytest.raises(ValueError, match='unmodulated'):
         export_graph(v1, [torch.randn(1, 3, 8, 8)], str(path), ['x'], ['y'])
     assert not path.exists()
+
+
+class _StemOnly(nn.Module):
+    """Holds the DCN model but calls only its stem, as OccCylindrical's
+    plane graph holds the whole model, DCN backbone included."""
+
+    def __init__(self):
+        super().__init__()
+        self.model = _model()
+
+    def forward(self, x):
+        return self.model.stem(x)
+
+
+def test_a_graph_that_calls_no_dcn_keeps_the_default_opset(tmp_path):
+    """A module holding DCN layers its forward does not call: the graph
+    has no DeformConv and is written at opset 18 (19 only where needed),
+    matching PyTorch; an explicit opset 19 is kept."""
+    module = _StemOnly().eval()
+    x = torch.randn(1, 3, 8, 8)
+    path = export_graph(module, [x], str(tmp_path / 'stem.onnx'), ['x'],
+                        ['y'])
+    summary = graph_summary(path)
+    assert summary['opset'] == 18 and 'DeformConv' not in summary['ops']
+    with torch.no_grad():
+        expected = module(x).numpy()
+    out = run_graph(onnx_session(path), dict(x=x))['y']
+    assert np.abs(out - expected).max() < 1e-5
+    path = export_graph(module, [x], str(tmp_path / 'stem19.onnx'), ['x'],
+                        ['y'], opset=19)
+    assert graph_summary(path)['opset'] == 19
