@@ -59,6 +59,9 @@ def test_config_builds_its_fingerprinted_model(path, fingerprints):
     assert differences(fingerprints[path], model_fingerprint(model)) == []
     cfg = Config.fromfile(osp.join(ROOT, path))
     assert 'projects.occ_common' in cfg.custom_imports['imports']
+    if cfg.val_evaluator is None:  # the SPVCNN pre-training: no metric
+        assert cfg.model.type == 'SPVCNNSegmentor'
+        return
     evaluators = cfg.val_evaluator if isinstance(
         cfg.val_evaluator, list) else [cfg.val_evaluator]
     for evaluator in evaluators:
@@ -71,8 +74,14 @@ def test_only_sdg_configs_read_lidarseg(path):
     it nor make 2-D semantic maps, except for training the seg2d variant,
     whose model has a 2-D semantic loss; SDG-OCC's make them (from
     lidarseg where the info has it, else from the occupancy labels). All
-    drop the ego vehicle's returns."""
+    drop the ego vehicle's returns. The SPVCNN lidarseg pre-training
+    trains on nothing else: it requires the labels and has no test."""
     cfg = Config.fromfile(path)
+    if cfg.model.type == 'SPVCNNSegmentor':
+        steps = {t['type']: t for t in cfg.train_dataloader.dataset.pipeline}
+        assert steps['LoadLidarSegLabels']['optional'] is False
+        assert 'RemoveEgoPoints' in steps and cfg.test_dataloader is None
+        return
     sdg = osp.basename(path).startswith('sdgocc')
     seg2d = cfg.model.get('loss_seg') is not None
     for loader, reads in ((cfg.train_dataloader, sdg or seg2d),

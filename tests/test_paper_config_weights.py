@@ -113,8 +113,10 @@ def test_paper_config_init_weights_loads_imagenet_r50(path, hub):
     """init_weights loads all 265 ResNet-50 tensors (53 convs, 53 BN x 4;
     the fc classifier is ignored and reported) and the model initialises
     without torchvision.
-    OccCylindrical keeps stage 1 frozen and BN in eval mode, as configured
-    for fine-tuning; SDG-OCC trains its whole backbone."""
+    OccCylindrical keeps stage 1 frozen, BN in eval mode and (as OCCFusion)
+    every BN's affine parameters frozen, as configured for fine-tuning:
+    trainable are the convs of stages 2-4 (their shortcut convs and the
+    DCN offsets included); SDG-OCC trains its whole backbone."""
     _, state = hub
     model = _build(path)
     model.init_weights()
@@ -126,8 +128,13 @@ def test_paper_config_init_weights_loads_imagenet_r50(path, hub):
     assert len(state) - 2 == 265
     frozen = [n for n, p in backbone.named_parameters() if not p.requires_grad]
     if 'occcyl' in path:
-        assert frozen and all(n.startswith(('conv1', 'bn1', 'layer1'))
-                              for n in frozen)
+        trainable = [n for n, p in backbone.named_parameters()
+                     if p.requires_grad]
+        assert trainable and all(
+            n.startswith(('layer2', 'layer3', 'layer4'))
+            and ('.conv' in n or '.downsample.0.' in n) for n in trainable)
+        assert all(n.startswith(('conv1', 'bn1', 'layer1')) or '.bn' in n
+                   or '.downsample.1.' in n for n in frozen)
         model.train()
         assert not backbone.bn1.training
         assert not backbone.layer4[0].bn1.training
@@ -161,14 +168,16 @@ def test_occcyl_configs_load_imagenet_swin_and_keep_dcn_offsets(path, hub):
 
 
 def test_without_checkpoint_the_backbone_trains_normally():
-    """checkpoint=None with frozen_stages=-1 and live BN: init_weights
-    passes, every backbone parameter trains and model.train() puts every
-    BN in training mode (it updates its statistics)."""
+    """checkpoint=None with frozen_stages=-1 and live BN (statistics and
+    affine parameters): init_weights passes, every backbone parameter
+    trains and model.train() puts every BN in training mode (it updates
+    its statistics)."""
     model = _build(
         OCC_CYL, **{
             'pretrained.img_backbone.checkpoint': None,
             'img_encoder.backbone.frozen_stages': -1,
-            'img_encoder.backbone.norm_eval': False
+            'img_encoder.backbone.norm_eval': False,
+            'img_encoder.backbone.norm_cfg.requires_grad': True
         })
     model.init_weights()
     model.train()
@@ -188,6 +197,24 @@ def test_without_checkpoint_frozen_random_layers_are_refused():
                        match=r'pretrained.img_backbone: no checkpoint, but '
                        r'RecomputedResNet has frozen_stages=1, '
                        r'norm_eval=True'):
+        model.init_weights()
+
+
+def test_without_checkpoint_frozen_bn_affine_is_refused():
+    """The paper config's BN affine parameters frozen (as OCCFusion, for
+    fine-tuning) without a checkpoint: the stages and statistics train,
+    but the 106 BN weights and biases (53 BN x 2) would stay 1 and 0
+    forever. init_weights refuses it, naming the count and the first."""
+    model = _build(
+        OCC_CYL, **{
+            'pretrained.img_backbone.checkpoint': None,
+            'img_encoder.backbone.frozen_stages': -1,
+            'img_encoder.backbone.norm_eval': False
+        })
+    with pytest.raises(ValueError,
+                       match=r'pretrained.img_backbone: no checkpoint, but '
+                       r'106 parameters of RecomputedResNet do not train '
+                       r'\(first: bn1.weight'):
         model.init_weights()
 
 

@@ -106,6 +106,11 @@ def narrow_options(cfg: Config) -> Dict:
                 'model.fusion.embed_dims': 16,
                 'model.fusion.num_heads': 2
             })
+    elif model.type == 'SPVCNNSegmentor':  # the lidarseg pre-training
+        opts = {
+            'model.lidar_encoder.base_channels': 8,
+            'model.lidar_encoder.stage_channels': [16, 16],
+        }
     else:
         raise AssertionError(f'no narrow twin for {model.type}')
     return opts

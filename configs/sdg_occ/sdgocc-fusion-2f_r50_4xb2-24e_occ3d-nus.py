@@ -33,3 +33,8 @@ train_dataloader = dict(
 val_dataloader = test_dataloader = dict(
     dataset=dict(_data, pipeline=test_pipeline))
 val_evaluator = test_evaluator = _base_._occ_metric
+# The LSS-lift rows' data (ablations/*-lss-2f_*): the LSS lift reads no
+# LiDAR, so the previous key frames load none.
+lss_data = [dict(dataset=dict(pipeline=[
+    dict(t, load_points=False) if t['type'] == 'LoadPreviousKeyFrames' else t
+    for t in pipeline])) for pipeline in (train_pipeline, test_pipeline)]

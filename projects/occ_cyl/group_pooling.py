@@ -45,7 +45,9 @@ class SpatialGroupPooling(BaseModule):
         out_channels (int): Channels of each plane.
         num_groups (int): ``M``; must divide ``R``, ``Theta`` and ``Z``.
             Defaults to 8 (the paper).
-        norm_cfg (dict): Normalisation of the MLP. Defaults to BN2d.
+        norm_cfg (dict, optional): Normalisation of the MLP's first layer;
+            None: none, the layer has a bias (PointOcc's Linear - ReLU -
+            Linear). Defaults to BN2d.
         with_cp (bool): In training, keep only the voxel features for the
             backward and recompute each plane's pooling and MLP there
             (exact, the MLP's BatchNorm statistics update once). At the

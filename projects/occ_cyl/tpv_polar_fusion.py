@@ -59,6 +59,11 @@ class TPVPolarFusion(BaseModule):
             ~100; :func:`~projects.occ_common.utils.device_path.chunk_items`).
         norm_cfg (dict): Normalisation of the MLPs and fusion.
             Defaults to BN2d.
+        fusion_gate (str): The channel gate of the plane fusions
+            (:class:`DynamicFusion2D`'s ``gate``). Defaults to 'conv'.
+        group_mlp_norm (bool): Normalise the first layer of the group
+            pooling MLPs with ``norm_cfg`` (True, the default) or not, as
+            PointOcc's ``Linear - ReLU - Linear`` (False).
         with_cp (bool): Recompute the group pooling in the backward
             (:class:`SpatialGroupPooling`'s ``with_cp``). Defaults to False.
         padded_voxels (bool, optional): Pool each cloud into a list of
@@ -83,6 +88,8 @@ class TPVPolarFusion(BaseModule):
                  fused_lift: bool = True,
                  lift_chunk_size: Optional[int] = None,
                  norm_cfg: ConfigType = dict(type='BN2d'),
+                 fusion_gate: str = 'conv',
+                 group_mlp_norm: bool = True,
                  with_cp: bool = False,
                  padded_voxels: Optional[bool] = None,
                  init_cfg: OptMultiConfig = None) -> None:
@@ -101,17 +108,19 @@ class TPVPolarFusion(BaseModule):
         self.fused_lift = fused_lift
         self.lift_chunk_size = lift_chunk_size
         self.plane_channels = plane_channels
+        pool_norm = norm_cfg if group_mlp_norm else None
         if with_camera:
             self.cam_pool = SpatialGroupPooling(cam_channels, plane_channels,
-                                                num_groups, norm_cfg, with_cp)
+                                                num_groups, pool_norm, with_cp)
         if with_lidar:
             self.lidar_pool = SpatialGroupPooling(lidar_channels,
                                                   plane_channels, num_groups,
-                                                  norm_cfg, with_cp)
+                                                  pool_norm, with_cp)
         if with_camera and with_lidar:
             self.fusions = nn.ModuleList([
                 DynamicFusion2D((plane_channels, plane_channels),
-                                plane_channels, norm_cfg) for _ in range(3)
+                                plane_channels, norm_cfg, fusion_gate)
+                for _ in range(3)
             ])
 
     def camera_voxels(self, depth: Tensor, context: Tensor,

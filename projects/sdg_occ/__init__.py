@@ -19,6 +19,7 @@ from .sdg_occ import SDGOcc
 from .sdg_view_transform import (SDGViewTransform, key_frame_points,
                                  points_to_depth_maps)
 from .semantic_diffusion import semantic_depth_diffusion
+from .spvcnn_segmentor import SPVCNNSegmentor
 from .virtual_points import (bilinear_incremental_discretization,
                              interpolate_depth_prob, virtual_point_depths,
                              virtual_point_offsets)
@@ -26,6 +27,7 @@ from .virtual_points import (bilinear_incremental_discretization,
 __all__ = [
     'BEVPoolIndexCache', 'BEVPoolIndices', 'ChannelToHeightHead',
     'FOADDistillLoss', 'NeighborhoodFusion', 'SDGBEVEncoder', 'SDGOcc',
+    'SPVCNNSegmentor',
     'SDGViewTransform', 'bev_pool', 'bev_pool_indices', 'bev_pool_mask',
     'bilinear_incremental_discretization', 'channels_to_height',
     'downsample_seg_labels', 'foad_weights', 'height_labels_to_xyz',

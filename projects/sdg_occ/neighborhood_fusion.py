@@ -337,8 +337,46 @@ def _window_slots(size: int, kernel_size: int, border: str,
     return keys.clamp(0, size - 1), inside, bias
 
 
+def split_heads(x: Tensor, num_heads: int) -> Tensor:
+    """View (B, C, H, W) as (B, heads, C / heads, H, W)."""
+    batch, channels, height, width = x.shape
+    return x.view(batch, num_heads, channels // num_heads, height, width)
+
+
+class _CrossAttention:
+    """The projections of one neighbourhood cross-attention layer (eq. 3)
+    and their use: ``Proj(NA(Q(x), K(cross), V(cross)))``."""
+
+    def _build_attention(self, query_channels: int, cross_channels: int,
+                         embed_dims: int, num_heads: int, kernel_size: int,
+                         border: str, out_channels: int) -> None:
+        self.num_heads = num_heads
+        self.kernel_size = kernel_size
+        self.border = border
+        self.query = nn.Conv2d(query_channels, embed_dims, 1)
+        self.key = nn.Conv2d(cross_channels, embed_dims, 1)
+        self.value = nn.Conv2d(cross_channels, embed_dims, 1)
+        span = 2 * kernel_size - 1
+        self.rel_bias = nn.Parameter(torch.zeros(num_heads, span, span))
+        nn.init.trunc_normal_(self.rel_bias, std=0.02)
+        self.proj = nn.Conv2d(embed_dims, out_channels, 1)
+
+    def _attend(self, x: Tensor, cross: Tensor) -> Tensor:
+        """Attended cross features of every cell of ``x``.
+
+        Returns:
+            Tensor: Shape (B, out_channels, H, W).
+        """
+        attended = neighborhood_attention(
+            split_heads(self.query(x), self.num_heads),
+            split_heads(self.key(cross), self.num_heads),
+            split_heads(self.value(cross), self.num_heads), self.rel_bias,
+            self.kernel_size, self.border)
+        return self.proj(attended.flatten(1, 2))
+
+
 @MODELS.register_module()
-class NeighborhoodFusion(BaseModule):
+class NeighborhoodFusion(_CrossAttention, BaseModule):
     """Fuse a source BEV with a cross BEV by neighbourhood attention.
 
     Implements eqs. 3-4 of SDG-OCC: the source gives the queries, the cross
@@ -362,6 +400,13 @@ class NeighborhoodFusion(BaseModule):
         num_heads (int): Attention heads. Defaults to 4.
         kernel_size (int): Neighbourhood size k (7 in the paper, Table 5).
             Defaults to 7.
+        num_layers (int): Attention layers. The first attends from the
+            source; each further one (:class:`NeighborhoodCrossLayer`)
+            attends from the previous layer's output to the same cross
+            BEV, with its own projections and a residual connection, before
+            the mix and the gate. The paper does not say how many; the
+            authors' release stacks three (``depth=3`` of its NAT block).
+            Defaults to 1, the module as it was (its state dict unchanged).
         border (str): Windows at the map border, one of :data:`BORDERS`:
             ``'shift'`` (NAT's, ref. [3], every query sees k * k keys) or
             ``'mask'`` (centred, cells outside the map dropped).
@@ -377,8 +422,12 @@ class NeighborhoodFusion(BaseModule):
                  num_heads: int = 4,
                  kernel_size: int = 7,
                  border: str = 'shift',
+                 num_layers: int = 1,
                  init_cfg: Optional[dict] = None):
         super().__init__(init_cfg=init_cfg)
+        if int(num_layers) < 1:
+            raise ValueError(f'NeighborhoodFusion num_layers must be >= 1, '
+                             f'got {num_layers}')
         if embed_dims % num_heads != 0:
             raise ValueError(f'embed_dims ({embed_dims}) must be divisible '
                              f'by num_heads ({num_heads})')
@@ -391,16 +440,12 @@ class NeighborhoodFusion(BaseModule):
         self.source_channels = source_channels
         self.cross_channels = cross_channels
         self.out_channels = out_channels
-        self.num_heads = num_heads
-        self.kernel_size = kernel_size
-        self.border = border
-        self.query = nn.Conv2d(source_channels, embed_dims, 1)
-        self.key = nn.Conv2d(cross_channels, embed_dims, 1)
-        self.value = nn.Conv2d(cross_channels, embed_dims, 1)
-        span = 2 * kernel_size - 1
-        self.rel_bias = nn.Parameter(torch.zeros(num_heads, span, span))
-        nn.init.trunc_normal_(self.rel_bias, std=0.02)
-        self.proj = nn.Conv2d(embed_dims, out_channels, 1)
+        self._build_attention(source_channels, cross_channels, embed_dims,
+                              num_heads, kernel_size, border, out_channels)
+        self.refine = nn.ModuleList(
+            NeighborhoodCrossLayer(out_channels, cross_channels, embed_dims,
+                                   num_heads, kernel_size, border)
+            for _ in range(int(num_layers) - 1))
         self.mix = nn.Sequential(
             nn.Conv2d(
                 source_channels + out_channels,
@@ -412,11 +457,6 @@ class NeighborhoodFusion(BaseModule):
         self.gate = nn.Sequential(
             nn.AdaptiveAvgPool2d(1), nn.Conv2d(out_channels, out_channels, 1),
             nn.Sigmoid())
-
-    def _heads(self, x: Tensor) -> Tensor:
-        batch, channels, height, width = x.shape
-        return x.view(batch, self.num_heads, channels // self.num_heads,
-                      height, width)
 
     def forward(self, source: Tensor, cross: Tensor) -> Tensor:
         """Fuse ``cross`` into ``source``.
@@ -441,10 +481,37 @@ class NeighborhoodFusion(BaseModule):
                 f'NeighborhoodFusion expects {self.source_channels} source '
                 f'(query) and {self.cross_channels} cross (key / value) '
                 f'channels, got {source.shape[1]} and {cross.shape[1]}')
-        attended = neighborhood_attention(
-            self._heads(self.query(source)), self._heads(self.key(cross)),
-            self._heads(self.value(cross)), self.rel_bias, self.kernel_size,
-            self.border)
-        attended = self.proj(attended.flatten(1, 2))
+        attended = self._attend(source, cross)
+        for layer in self.refine:
+            attended = layer(attended, cross)
         fused = self.mix(torch.cat([source, attended], dim=1))
         return fused * self.gate(fused)
+
+
+class NeighborhoodCrossLayer(_CrossAttention, nn.Module):
+    """A further neighbourhood cross-attention layer of
+    :class:`NeighborhoodFusion`: ``x + Proj(NA(Q(x), K(cross), V(cross)))``
+    (eq. 3 from the previous layer's output, with a residual connection).
+
+    Args:
+        channels (int): Channels of ``x`` (and of the output).
+        cross_channels (int): Channels of the cross BEV (keys, values).
+        embed_dims (int): Attention width, split over the heads.
+        num_heads (int): Attention heads.
+        kernel_size (int): Neighbourhood size k.
+        border (str): One of :data:`BORDERS`.
+    """
+
+    def __init__(self, channels: int, cross_channels: int, embed_dims: int,
+                 num_heads: int, kernel_size: int, border: str) -> None:
+        super().__init__()
+        self._build_attention(channels, cross_channels, embed_dims,
+                              num_heads, kernel_size, border, channels)
+
+    def forward(self, x: Tensor, cross: Tensor) -> Tensor:
+        """Attend from ``x`` (B, C, H, W) to ``cross`` (B, C_c, H, W).
+
+        Returns:
+            Tensor: Shape (B, C, H, W).
+        """
+        return x + self._attend(x, cross)

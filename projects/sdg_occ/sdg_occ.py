@@ -15,13 +15,16 @@ The variant is what the configured sub-modules make of it
   values), Sec. 3.5; the fused BEV goes to the head, in training and
   inference.
 * with a ``loss_distill`` too: SDG-KL (Fig. 5b): in training a
-  LiDAR-dominant fusion
-  (LiDAR queries, camera keys and values) is a teacher, supervised by the
-  occupancy loss, and FOAD distils it into the camera BEV, which is also
-  supervised; at inference the LiDAR encoder and the fusion are skipped
-  and the camera BEV goes to the head. The teacher decodes its fused BEV
-  with the student's BEV encoder and head, or (``separate_teacher_head``,
-  as the configs do) with its own training-only copies.
+  LiDAR-dominant fusion (LiDAR queries, camera keys and values) is a
+  teacher and FOAD distils it into the camera BEV; at inference the LiDAR
+  encoder and the fusion are skipped and the camera BEV goes to the head.
+  ``kl_losses`` says what else trains: ``'paper'`` is Sec. 3.5 as written,
+  "the sum of distillation and classification loss", one occupancy loss
+  on the fused BEV through the one BEV encoder and head that the camera
+  BEV then uses at inference; ``'three_loss'`` (the constructor's default,
+  for configs written before) adds the student's own occupancy loss and
+  supervises the teacher separately, with the student's decoder or
+  (``separate_teacher_head``) its own training-only copies.
 * neither: the camera rows (the Baseline and "+SDG" rows of Table 3): no
   LiDAR encoder, no fusion; the camera BEV goes to the head. With the plain LSS
   lift this is the FlashOcc-like baseline, which needs no LiDAR points at
@@ -46,10 +49,14 @@ from mmdet3d.registry import MODELS
 from torch import Tensor, nn
 
 from projects.occ_common.models.detectors import BaseOccDetector
+from projects.occ_common.models.sparse.point_seg_head import \
+    gather_point_labels
 from .temporal_fusion import (FrameBEVCache, TemporalBEVFusion, frame_points,
                               frame_samples)
 
 _VARIANTS = ('camera', 'fusion', 'kl')
+#: SDGOcc's ``kl_losses``: what trains SDG-KL besides FOAD.
+KL_LOSSES = ('paper', 'three_loss')
 
 
 def configured_variant(lidar_encoder: Optional[dict], fusion: Optional[dict],
@@ -123,25 +130,42 @@ class SDGOcc(BaseOccDetector):
             BEV's width. Defaults to None.
         loss_distill (dict, optional): ``FOADDistillLoss``: makes the model
             SDG-KL. Defaults to None.
+        point_seg_head (dict, optional): ``PointSegHead`` on the LiDAR
+            encoder's point features, trained with the lidarseg labels
+            (``loss_point_seg``), as the authors' release trains its SPVCNN
+            (not in the paper); needs a ``lidar_encoder`` and the points'
+            labels. Defaults to None.
         loss_depth (dict, optional): ``DepthBCELoss``. Defaults to None.
         loss_seg (dict, optional): 2D semantic loss on (N, C) logits, e.g.
             ``mmdet.CrossEntropyLoss`` with ``ignore_index=255``.
             Defaults to None.
+        kl_losses (str): ``'kl'`` only: which losses train SDG-KL.
+            ``'paper'``: one occupancy (classification) loss, on the
+            teacher's fused BEV decoded by the model's one BEV encoder and
+            head, plus FOAD (eq. 8), as Sec. 3.5 writes ("trained with the
+            sum of distillation and classification loss") and the authors'
+            release trains (one head, its loss on the fused path); the
+            camera BEV meets that head at inference. ``'three_loss'``:
+            the student's own occupancy loss, the teacher's (times
+            ``teacher_loss_weight``, with ``separate_teacher_head``) and
+            FOAD. Defaults to 'three_loss', the form of configs written
+            before 2026-11-28; the SDG-KL configs set 'paper'.
         teacher_loss_weight (float): Factor of the teacher's occupancy
-            losses in ``'kl'`` training. Defaults to 1.0.
-        separate_teacher_head (bool): ``'kl'`` only. False (the default)
-            decodes the teacher's fused BEV with the student's BEV encoder
-            and head, one set of weights fitting both; True gives the
-            teacher its own BEV encoder and head (``teacher_bev_encoder``,
-            ``teacher_occ_head``, training only), so the inference head
-            fits the camera BEV alone and FOAD is the only link between
-            the two. The paper does not say which.
+            losses in ``'kl'`` training with ``kl_losses='three_loss'``.
+            Defaults to 1.0.
+        separate_teacher_head (bool): ``kl_losses='three_loss'`` only.
+            False (the default) decodes the teacher's fused BEV with the
+            student's BEV encoder and head, one set of weights fitting
+            both; True gives the teacher its own BEV encoder and head
+            (``teacher_bev_encoder``, ``teacher_occ_head``, training
+            only), so the inference head fits the camera BEV alone and
+            FOAD is the only link between the two.
         detach_teacher_camera (bool): ``'kl'`` only. False (the default)
-            lets the teacher's occupancy loss reach the camera branch
-            through the camera keys and values of its fusion; True feeds
+            lets the fused BEV's occupancy loss reach the camera branch
+            through the camera keys and values of the fusion; True feeds
             the fusion a detached camera BEV, so that the camera branch
-            learns from its own occupancy loss and FOAD alone (the paper
-            does not say which).
+            learns from FOAD (and, with ``'three_loss'``, its own
+            occupancy loss) alone (the paper does not say which).
         seg_empty_label (int, optional): 2D semantic target of feature
             cells that no labelled LiDAR return hits. None (the default)
             ignores them: nothing says what such a cell shows, and a label
@@ -181,8 +205,10 @@ class SDGOcc(BaseOccDetector):
                  lidar_encoder: Optional[dict] = None,
                  fusion: Optional[dict] = None,
                  loss_distill: Optional[dict] = None,
+                 point_seg_head: Optional[dict] = None,
                  loss_depth: Optional[dict] = None,
                  loss_seg: Optional[dict] = None,
+                 kl_losses: str = 'three_loss',
                  teacher_loss_weight: float = 1.0,
                  separate_teacher_head: bool = False,
                  detach_teacher_camera: bool = False,
@@ -249,6 +275,8 @@ class SDGOcc(BaseOccDetector):
                 raise ValueError(f'SDGOcc: {name} is for '
                                  f"variant='kl' only, got {variant!r}")
         self.detach_teacher_camera = bool(detach_teacher_camera)
+        self.kl_losses = self._check_kl_losses(
+            kl_losses, variant, separate_teacher_head, teacher_loss_weight)
         if predict_branch not in ('student', 'teacher'):
             raise ValueError("SDGOcc predict_branch must be 'student' or "
                              f"'teacher', got {predict_branch!r}")
@@ -262,6 +290,16 @@ class SDGOcc(BaseOccDetector):
             self.teacher_occ_head = self.build_child(
                 occ_head, dz=self.occ_shape[2], **self.head_defaults())
         self.lidar_encoder = self.build_child(lidar_encoder, **grid)
+        self.point_seg_head = None
+        if point_seg_head:
+            if self.lidar_encoder is None:
+                raise ValueError('SDGOcc: point_seg_head reads the LiDAR '
+                                 "encoder's point features; set a "
+                                 'lidar_encoder or point_seg_head=None')
+            self.point_seg_head = MODELS.build(
+                point_seg_head,
+                default_args=dict(
+                    in_channels=self.lidar_encoder.point_channels))
         self.fusion = None
         if fusion:
             self.fusion = self.build_child(
@@ -297,6 +335,23 @@ class SDGOcc(BaseOccDetector):
                 'branch; loss_distill: SDG-KL). Drop variant; the '
                 'sub-modules say it.')
         return found
+
+    @staticmethod
+    def _check_kl_losses(kl_losses: str, variant: str,
+                         separate_teacher_head: bool,
+                         teacher_loss_weight: float) -> str:
+        """The checked ``kl_losses``; the teacher-head options belong to
+        the three-loss form."""
+        if kl_losses not in KL_LOSSES:
+            raise ValueError(f'SDGOcc kl_losses must be one of {KL_LOSSES},'
+                             f' got {kl_losses!r}')
+        if variant == 'kl' and kl_losses == 'paper' and (
+                separate_teacher_head or teacher_loss_weight != 1.0):
+            raise ValueError(
+                "SDGOcc(kl_losses='paper') trains one head with one "
+                'occupancy loss (on the fused BEV); separate_teacher_head '
+                "and teacher_loss_weight belong to kl_losses='three_loss'")
+        return kl_losses
 
     @property
     def variant(self) -> str:
@@ -555,8 +610,10 @@ class SDGOcc(BaseOccDetector):
                 ``gt_seg_2d`` (N, H, W), and the camera metainfo.
 
         Returns:
-            dict[str, Tensor]: Occupancy losses (plus ``*_teacher`` and
-            ``loss_distill`` for SDG-KL), ``loss_depth``, ``loss_seg``.
+            dict[str, Tensor]: Occupancy losses (for SDG-KL: of the fused
+            BEV with ``kl_losses='paper'``, of the camera BEV plus
+            ``*_teacher`` with ``'three_loss'``), ``loss_distill`` for
+            SDG-KL, ``loss_depth``, ``loss_seg``, ``loss_point_seg``.
         """
         device = inputs['imgs'].device
         depth_out, cam = self.extract_camera_bev(inputs, data_samples)
@@ -567,21 +624,32 @@ class SDGOcc(BaseOccDetector):
                 self.occ_head.loss(self.bev_encoder(cam['bev']), gt_occ))
             return losses
         lidar = self.extract_lidar_bev(inputs)
+        if self.point_seg_head is not None:
+            labels = gather_point_labels(data_samples, inputs['points'])
+            losses.update(
+                self.point_seg_head.loss(lidar['point_feats'],
+                                         labels[lidar['point_index']]))
         if self.detach_teacher_camera:  # 'kl' only (checked at build)
             fused = self.fuse(lidar, dict(cam, bev=cam['bev'].detach()))
         else:
             fused = self.fuse(lidar, cam)
-        if self.variant == 'fusion':
+        if self.variant == 'fusion' or self.kl_losses == 'paper':
+            # SDG-KL's 'paper' form: the one classification loss is the
+            # fused BEV's, through the head the camera BEV meets at
+            # inference.
             losses.update(self.occ_head.loss(self.bev_encoder(fused), gt_occ))
+        else:
+            losses.update(
+                self.occ_head.loss(self.bev_encoder(cam['bev']), gt_occ))
+            teacher_encoder, teacher_head = self._teacher_decoder()
+            teacher = teacher_head.loss(
+                teacher_encoder(fused), gt_occ, suffix='_teacher')
+            losses.update({
+                key: value * self.teacher_loss_weight
+                for key, value in teacher.items()
+            })
+        if self.variant == 'fusion':
             return losses
-        losses.update(self.occ_head.loss(self.bev_encoder(cam['bev']), gt_occ))
-        teacher_encoder, teacher_head = self._teacher_decoder()
-        teacher = teacher_head.loss(
-            teacher_encoder(fused), gt_occ, suffix='_teacher')
-        losses.update({
-            key: value * self.teacher_loss_weight
-            for key, value in teacher.items()
-        })
         # The teacher's region is where the LiDAR identified something (the
         # "LiDAR-identified regions" of FOAD), not the whole fused map; the
         # camera region is the pooled coverage, the student the BEV after

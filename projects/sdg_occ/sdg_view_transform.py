@@ -18,6 +18,7 @@ from mmengine.model import BaseModule
 from torch import Tensor
 
 from projects.occ_common.geometry.depth import (nearest_depth_map,
+                                                normalize_depth_bound,
                                                 num_depth_bins)
 from projects.occ_common.geometry.inverse import invert_matrix
 from projects.occ_common.models.layers.camera_geometry import (
@@ -176,7 +177,7 @@ class SDGViewTransform(BaseModule):
                              "pixel with LSS and needs fallback='lss'")
         self.point_cloud_range = tuple(float(v) for v in point_cloud_range)
         self.bev_shape = tuple(int(v) for v in bev_shape)
-        self.depth_bound = tuple(float(v) for v in depth_bound)
+        self.depth_bound = normalize_depth_bound(depth_bound)
         self.num_bins = num_depth_bins(self.depth_bound)
         self.diffusion_radius = float(diffusion_radius)
         self.layer_radius = float(layer_radius)

@@ -35,7 +35,8 @@ from typing import Sequence, Tuple
 import torch
 from torch import Tensor
 
-from projects.occ_common.geometry.depth import num_depth_bins
+from projects.occ_common.geometry.depth import (depth_bin_coordinate,
+                                                num_depth_bins)
 from projects.occ_common.utils.precision import float32_math
 
 
@@ -86,7 +87,8 @@ def interpolate_depth_prob(depth_prob: Tensor, depths: Tensor,
                            depth_bound: Sequence[float]) -> Tensor:
     """Linearly interpolate a per-pixel depth distribution at given depths.
 
-    With u = (depth - dmin) / step clamped to [0, D - 1], k = floor(u) and
+    With u = :func:`depth_bin_coordinate` (``(depth - dmin) / step`` for
+    uniform bins) clamped to [0, D - 1], k = floor(u) and
     t = u - k, the value is ``(1 - t) * p[k] + t * p[k + 1]``. A depth
     before the first bin or past the last one takes that end bin's value:
     the distribution says nothing beyond its range, and the LiDAR depth
@@ -114,8 +116,8 @@ def interpolate_depth_prob(depth_prob: Tensor, depths: Tensor,
                          f'({depth_prob.shape[0]}, L, '
                          f'{depth_prob.shape[2]}, {depth_prob.shape[3]}), '
                          f'got {tuple(depths.shape)}')
-    dmin, _, step = (float(v) for v in depth_bound)
-    pos = ((depths - dmin) / step).clamp(0, num_bins - 1)
+    pos = depth_bin_coordinate(depths.clamp(min=1e-6),
+                               depth_bound).clamp(0, num_bins - 1)
     lower = pos.floor()
     frac = pos - lower
     lower = lower.long()

@@ -40,3 +40,25 @@ def test_mismatched_planes_raise():
         fusion(torch.zeros(1, 3, 4, 4), torch.zeros(1, 3, 4, 4))
     with pytest.raises(ValueError, match='one spatial size'):
         fusion(torch.zeros(1, 3, 4, 4), torch.zeros(1, 2, 4, 5))
+
+
+def test_squeeze_excite_gate_is_occfusions():
+    """gate='squeeze_excite': out = F * sigmoid(W2 relu(W1 mean_hw(F)))
+    with W1 (C/2 x C) and W2 (C x C/2), no biases (OCCFusion's released
+    DynamicFusion2D), recomputed by hand from the weights; 2 * 4 * 2 = 16
+    gate parameters against the 'conv' gate's 4 * 4 + 4 = 20."""
+    torch.manual_seed(0)
+    fusion = DynamicFusion2D((3, 2), 4, gate='squeeze_excite').eval()
+    cam, lidar = torch.randn(2, 3, 5, 6), torch.randn(2, 2, 5, 6)
+    fused = fusion.fuse(torch.cat([cam, lidar], 1))
+    w1 = fusion.gate[1].weight.view(2, 4)
+    w2 = fusion.gate[3].weight.view(4, 2)
+    pooled = fused.mean(dim=(2, 3))
+    gate = torch.sigmoid(torch.relu(pooled @ w1.T) @ w2.T)
+    torch.testing.assert_close(fusion(cam, lidar),
+                               fused * gate[:, :, None, None])
+    assert sum(p.numel() for p in fusion.gate.parameters()) == 16
+    assert sum(p.numel() for p in DynamicFusion2D(
+        (3, 2), 4).gate.parameters()) == 20
+    with pytest.raises(ValueError, match='gate must be one of'):
+        DynamicFusion2D((3, 2), 4, gate='se')

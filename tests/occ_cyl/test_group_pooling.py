@@ -129,6 +129,25 @@ def test_forward_shapes_and_backward():
     assert grad.tolist() == [0.0, 8.0, 0.0, 8.0]
 
 
+def test_mlp_without_norm_is_pointocc_linear_relu_linear():
+    """norm_cfg=None: each plane's MLP is PointOcc's Linear(M C, C_out) -
+    ReLU - Linear(C_out, C_out), both with bias, no normalisation, checked
+    by applying the two layers' weights to the pooled planes by hand."""
+    torch.manual_seed(0)
+    pool = SpatialGroupPooling(2, 3, num_groups=2, norm_cfg=None).eval()
+    first, second = pool.mlps[0]
+    assert first.norm_cfg is None and first.conv.bias is not None
+    assert not any(isinstance(m, torch.nn.modules.batchnorm._BatchNorm)
+                   for m in pool.modules())
+    feats, coords = _rows(_volume())
+    grouped = pool.group_pool(feats, coords, SHAPE, 1, 0)
+    hidden = torch.relu(torch.einsum('oc,bchw->bohw', first.conv.weight[
+        ..., 0, 0], grouped) + first.conv.bias[:, None, None])
+    expected = torch.einsum('oc,bchw->bohw', second.weight[..., 0, 0],
+                            hidden) + second.bias[:, None, None]
+    torch.testing.assert_close(pool(feats, coords, SHAPE, 1)[0], expected)
+
+
 def test_no_voxel_and_empty_batch():
     """No occupied voxel gives all-zero planes; a batch of zero samples
     zero-sized planes."""

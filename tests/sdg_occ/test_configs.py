@@ -49,13 +49,15 @@ COUPLED = {
 }
 KL_KEYS = {
     'loss_distill.type', 'loss_distill.alpha',
-    'loss_distill.beta', 'loss_distill.loss_weight', 'teacher_loss_weight',
-    'separate_teacher_head'
+    'loss_distill.beta', 'loss_distill.loss_weight', 'kl_losses'
 }
 #: Table 3's rows without the SDG lift also drop its semantic head.
 NO_SDG_KEYS = {'view_transform.use_sdg', 'depth_net.seg_channels', 'loss_seg'}
-#: Table 3's camera-only rows: no LiDAR encoder, no fusion.
-CAMERA_KEYS = {'lidar_encoder', 'fusion'}
+#: Table 3's camera-only rows: no LiDAR encoder, no fusion (nor the
+#: encoder's point segmentation head and pretrained entry).
+CAMERA_KEYS = {
+    'lidar_encoder', 'fusion', 'point_seg_head', 'pretrained.lidar_encoder'
+}
 DELTAS = {
     FUSION: (MODEL_BASE, COUPLED | {'loss_mask_key'}),
     # SurroundOcc: a LiDAR voxel that divides the 0.5 m cell and the SCAL
@@ -91,10 +93,11 @@ DELTAS = {
     'sdgocc-camera-lss': (FUSION, CAMERA_KEYS | NO_SDG_KEYS),
     'sdgocc-camera-sdg': (FUSION, CAMERA_KEYS),
     'sdgocc-fusion-lss': (FUSION, NO_SDG_KEYS),
-    # ... and its camera rows and SDG-KL over two frames: the same deltas
-    # on the two-frame SDG-Fusion.
+    # ... and its rows and SDG-KL over two frames: the same deltas on the
+    # two-frame SDG-Fusion.
     'sdgocc-camera-lss-2f': (FUSION_2F, CAMERA_KEYS | NO_SDG_KEYS),
     'sdgocc-camera-sdg-2f': (FUSION_2F, CAMERA_KEYS),
+    'sdgocc-fusion-lss-2f': (FUSION_2F, NO_SDG_KEYS),
     _main('kl-2f', 'occ3d-nus'): (FUSION_2F, KL_KEYS),
 }
 
@@ -106,18 +109,19 @@ def _name(path):
 def test_config_inventory():
     """Both variants on both datasets, as tiny and small synthetic configs,
     and the deltas of Tables 3 (3 files, and the two camera rows over two
-    frames; SDG + FOAD is the main fusion config), 4 (6) and 5 (4)."""
+    frames, and the three of them over two frames; SDG + FOAD is the main
+    fusion config), 4 (6) and 5 (4)."""
     names = {osp.basename(p) for p in MAIN}
     for variant in ('fusion', 'kl'):
         for dataset in ('occ3d-nus', 'surroundocc-nus'):
             assert osp.basename(_main(variant, dataset)) in names
         assert osp.basename(_tiny(variant)) in names
         assert osp.basename(_small(variant)) in names
-    assert len(ABLATIONS) == 15
+    assert len(ABLATIONS) == 16
     table3 = sorted(_name(p) for p in ABLATIONS if _name(p) in DELTAS)
     assert table3 == [
         'sdgocc-camera-lss', 'sdgocc-camera-lss-2f', 'sdgocc-camera-sdg',
-        'sdgocc-camera-sdg-2f', 'sdgocc-fusion-lss'
+        'sdgocc-camera-sdg-2f', 'sdgocc-fusion-lss', 'sdgocc-fusion-lss-2f'
     ]
 
 

@@ -166,6 +166,38 @@ def test_fusion_forward_backward_and_gate_range():
     assert fusion.rel_bias.shape == (2, 5, 5)
 
 
+def test_stacked_layers_refine_the_attended_features():
+    """num_layers=3 (the authors' release stacks three): the first layer's
+    parameters keep their names (a one-layer state dict is a subset), two
+    further layers attend from the previous output with their own
+    projections; with the further layers' output projections at zero they
+    add nothing (their residual passes the first layer's output on), so
+    the output is the one-layer module's exactly, and otherwise it
+    differs and every further parameter gets a gradient."""
+    torch.manual_seed(0)
+    one = NeighborhoodFusion(6, 4, 5, embed_dims=8, num_heads=2,
+                             kernel_size=3)
+    three = NeighborhoodFusion(6, 4, 5, embed_dims=8, num_heads=2,
+                               kernel_size=3, num_layers=3)
+    assert set(one.state_dict()) < set(three.state_dict())
+    assert len(three.refine) == 2
+    three.load_state_dict(one.state_dict(), strict=False)
+    for layer in three.refine:
+        torch.nn.init.zeros_(layer.proj.weight)
+        torch.nn.init.zeros_(layer.proj.bias)
+    source, cross = torch.randn(2, 6, 8, 8), torch.randn(2, 4, 8, 8)
+    torch.testing.assert_close(three(source, cross), one(source, cross))
+    for layer in three.refine:
+        torch.nn.init.normal_(layer.proj.weight)
+    out = three(source, cross)
+    assert not torch.allclose(out, one(source, cross))
+    out.pow(2).mean().backward()
+    for name, param in three.refine.named_parameters():
+        assert param.grad is not None and param.grad.abs().sum() > 0, name
+    with pytest.raises(ValueError, match='num_layers'):
+        NeighborhoodFusion(6, 4, 5, embed_dims=8, num_heads=2, num_layers=0)
+
+
 def test_fusion_empty_batch():
     fusion = NeighborhoodFusion(3, 3, 3, embed_dims=4, num_heads=2,
                                 kernel_size=3).eval()

@@ -210,6 +210,116 @@ def test_kl_teacher_loss_reaches_the_camera_unless_detached(detach):
     assert _grad_sum(model.depth_net) > 0
 
 
+def test_kl_paper_form_is_one_occupancy_loss_on_the_fused_bev():
+    """``kl_losses='paper'`` (Sec. 3.5: "the sum of distillation and
+    classification loss"): the losses are FOAD, the auxiliary ones and one
+    occupancy loss, which equals the head's loss on the fused BEV through
+    the one BEV encoder (recomputed here from the model's own parts), not
+    the camera BEV's; its three-loss twin with the same weights computes
+    the camera BEV's under the same key and the teacher's with a suffix,
+    whose value is the paper form's occupancy loss."""
+    torch.manual_seed(0)
+    paper = MODELS.build(dict(_cfg('kl'), kl_losses='paper')).train()
+    torch.manual_seed(0)
+    three = MODELS.build(dict(_cfg('kl'), kl_losses='three_loss')).train()
+    inputs, samples = _batch(num_points=(60, 60))
+    torch.manual_seed(1)
+    losses = paper(inputs, samples, mode='loss')
+    assert set(losses) == {'loss_focal', 'loss_depth', 'loss_seg',
+                           'loss_distill'}
+    torch.manual_seed(1)
+    _, cam = paper.extract_camera_bev(inputs, samples)
+    fused = paper.fuse(paper.extract_lidar_bev(inputs), cam)
+    gt_occ = paper.occupancy_targets(samples, 'cpu')
+    on_fused = paper.occ_head.loss(paper.bev_encoder(fused), gt_occ)
+    on_camera = paper.occ_head.loss(paper.bev_encoder(cam['bev']), gt_occ)
+    torch.testing.assert_close(losses['loss_focal'], on_fused['loss_focal'])
+    assert not torch.isclose(losses['loss_focal'], on_camera['loss_focal'])
+    torch.manual_seed(1)
+    three_losses = three(inputs, samples, mode='loss')
+    torch.testing.assert_close(three_losses['loss_focal_teacher'],
+                               losses['loss_focal'])
+    torch.testing.assert_close(three_losses['loss_focal'],
+                               on_camera['loss_focal'])
+
+
+def test_kl_paper_form_trains_every_part_and_predicts_from_the_camera():
+    """The paper form's total loss reaches the image backbone, the LiDAR
+    encoder, the fusion and the one head; its state dict has no teacher
+    copies, and inference (tensor mode) runs neither the LiDAR encoder nor
+    the fusion."""
+    model = MODELS.build(dict(_cfg('kl'), kl_losses='paper')).train()
+    inputs, samples = _batch(num_points=(60, 60))
+    sum(model(inputs, samples, mode='loss').values()).backward()
+    for part in ('img_backbone', 'lidar_encoder', 'fusion', 'bev_encoder',
+                 'occ_head'):
+        assert _grad_sum(getattr(model, part)) > 0, part
+    assert not any(k.startswith('teacher_') for k in model.state_dict())
+    calls = (_count_calls(model.lidar_encoder), _count_calls(model.fusion))
+    with torch.no_grad():
+        logits = model.eval()(inputs, samples, mode='tensor')
+    assert calls == ([], []) and logits.shape == (2, NUM_CLASSES, 8, 8, 4)
+
+
+@pytest.mark.parametrize('bad', [
+    dict(kl_losses='paper', separate_teacher_head=True),
+    dict(kl_losses='paper', teacher_loss_weight=0.5),
+    dict(kl_losses='student'),
+])
+def test_kl_losses_refuses_what_its_form_has_not(bad):
+    """The paper form has no teacher head or teacher weight; an unknown
+    form is named."""
+    with pytest.raises(ValueError, match='kl_losses'):
+        MODELS.build(dict(_cfg('kl'), **bad))
+
+
+def _with_point_labels(samples, points, labels_of):
+    from mmdet3d.structures import PointData
+    for sample, pts in zip(samples, points):
+        sample.gt_pts_seg = PointData(pts_semantic_mask=labels_of(pts))
+
+
+@pytest.mark.parametrize('variant', ['fusion', 'kl'])
+def test_point_seg_loss_is_the_heads_cross_entropy_on_the_points(variant):
+    """The release's point segmentation loss: 0.1 x the mean cross-entropy
+    of the head's logits over the labelled points inside the encoder's
+    range, recomputed here from the encoder's point features and each
+    point's own label (class 1 below z = 0, else 2; every third point
+    unlabelled, 255). All points unlabelled: 0 with a gradient. Points
+    without labels in the samples: an error naming the sample."""
+    cfg = dict(_cfg(variant),
+               point_seg_head=dict(type='PointSegHead', num_classes=3,
+                                   loss_weight=0.1))
+    torch.manual_seed(0)
+    model = MODELS.build(cfg).train()
+    inputs, samples = _batch(num_points=(60, 45))
+
+    def labels_of(pts):
+        labels = 1 + (pts[:, 2] >= 0).long()
+        labels[::3] = 255
+        return labels
+
+    _with_point_labels(samples, inputs['points'], labels_of)
+    torch.manual_seed(1)
+    losses = model(inputs, samples, mode='loss')
+    out = model.lidar_encoder.encode_points(list(inputs['points']))
+    labels = torch.cat([labels_of(p) for p in inputs['points']])
+    labels = labels[out['point_index']]
+    logits = model.point_seg_head(out['point_feats'])
+    valid = labels != 255
+    expected = 0.1 * torch.nn.functional.cross_entropy(logits[valid],
+                                                       labels[valid])
+    torch.testing.assert_close(losses['loss_point_seg'], expected)
+    _with_point_labels(samples, inputs['points'],
+                       lambda p: torch.full((len(p), ), 255))
+    silent = model(inputs, samples, mode='loss')['loss_point_seg']
+    assert silent == 0 and silent.requires_grad
+    for sample in samples:
+        del sample.gt_pts_seg
+    with pytest.raises(ValueError, match='no point labels'):
+        model(inputs, samples, mode='loss')
+
+
 @pytest.mark.parametrize('switch',
                          ['separate_teacher_head', 'detach_teacher_camera'])
 def test_teacher_switches_are_refused_outside_kl(switch):

@@ -51,6 +51,21 @@ def test_interpolated_values_by_hand():
         torch.tensor([0.15, 0.25, 0.35, 0.1, 0.4, 0.225, 0.1, 0.4, 0.4]))
 
 
+def test_interpolation_runs_on_the_sid_coordinate():
+    """SID bins (1, 5, 1, 'sid') lie at 1, 1.587, 2.520, 4 m; 2 m is at
+    coordinate 3 log 2 / log 4 = 1.5, halfway between bins 1 and 2: p gives
+    (0.2 + 0.3) / 2 = 0.25 and q 0.25; 4 m is bin 3 exactly (0.4, 0.1),
+    where the uniform bins would put it too (4 m is their bin 3 as well),
+    while 2 m is uniform bin 1 (0.2, 0.3)."""
+    depths = torch.tensor([2.0, 4.0]).view(1, 2, 1, 1).expand(1, 2, 1, 2)
+    sid = interpolate_depth_prob(_prob(), depths, BOUND + ('sid', ))
+    torch.testing.assert_close(
+        sid[0, :, 0], torch.tensor([[0.25, 0.25], [0.4, 0.1]]))
+    uniform = interpolate_depth_prob(_prob(), depths, BOUND)
+    torch.testing.assert_close(
+        uniform[0, :, 0], torch.tensor([[0.2, 0.3], [0.4, 0.1]]))
+
+
 def test_weight_mass_equals_distribution_mass_per_pixel():
     """Item 5 of issue 12: a pixel's virtual points carry its whole depth
     mass, whatever r and l, also where d lies beyond the last bin.

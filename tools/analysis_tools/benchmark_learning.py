@@ -67,6 +67,11 @@ _CAMERA_LSS = [
 #: SDG-OCC Table 3's "+SDG" row (configs/sdg_occ/ablations/
 #: sdgocc-camera-sdg_*): the SDG lift without the LiDAR branch.
 _CAMERA_SDG = ['model.lidar_encoder=None', 'model.fusion=None']
+#: SDG-KL trained with three losses (SDGOcc's kl_losses='three_loss'), as
+#: the SDG-KL configs were before 2026-11-28.
+_THREE_LOSS = [
+    'model.kl_losses=three_loss', 'model.separate_teacher_head=True'
+]
 #: Named runs: name -> (config, extra --cfg-options).
 RUNS = {
     'occcyl-tiny': ('configs/occ_cyl/'
@@ -124,26 +129,34 @@ RUNS.update({
             'train_dataloader.dataset.pipeline.7.rot90=True'
         ]),
     'sdg-fusion-small': (_SDG_SMALL.format('fusion'), []),
+    # SDG-KL as Sec. 3.5 writes it (kl_losses='paper', the config's):
+    # one occupancy loss on the fused BEV through the one head, plus FOAD.
     'sdg-kl-small': (_SDG_SMALL.format('kl'), []),
     # ... distilling standardised features (FOADDistillLoss's docstring:
-    # eq. 8 on the raw ones pulled 7-13x harder than the occupancy loss
+    # eq. 8 on the raw ones pulled 4-27x harder than the occupancy loss
     # at initialisation).
     'sdg-kl-small-norm': (_SDG_SMALL.format('kl'),
                           ['model.loss_distill.normalize=channel']),
+    # The SDG-KL configs' form before 2026-11-28: the camera BEV's own
+    # occupancy loss, the teacher's through its own head, and FOAD.
+    'sdg-kl-small-threeloss': (_SDG_SMALL.format('kl'), _THREE_LOSS),
+    'sdg-kl-small-threeloss-norm': (
+        _SDG_SMALL.format('kl'),
+        _THREE_LOSS + ['model.loss_distill.normalize=channel']),
     # Trained without the camera mask, scored with RayIoU beside the
     # camera-mask mIoU.
     'sdg-fusion-small-nomask': (_SDG_SMALL_NOMASK.format('fusion'), []),
     'sdg-kl-small-nomask': (_SDG_SMALL_NOMASK.format('kl'), []),
     'sdg-camera-lss-small': (_SDG_SMALL.format('fusion'), _CAMERA_LSS),
     'sdg-camera-sdg-small': (_SDG_SMALL.format('fusion'), _CAMERA_SDG),
-    # SDG-KL whose teacher decodes with the student's BEV encoder and
-    # head (the configs give it its own: kl_model's comment).
+    # The three-loss SDG-KL whose teacher decodes with the student's BEV
+    # encoder and head.
     'sdg-kl-small-sharedhead': (_SDG_SMALL.format('kl'),
-                                ['model.separate_teacher_head=False']),
+                                ['model.kl_losses=three_loss']),
     # ... and whose teacher's loss does not reach the camera branch.
     'sdg-kl-small-sharedhead-detachcam': (
         _SDG_SMALL.format('kl'), [
-            'model.separate_teacher_head=False',
+            'model.kl_losses=three_loss',
             'model.detach_teacher_camera=True'
         ]),
 })

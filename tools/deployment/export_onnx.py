@@ -4,7 +4,7 @@ Usage::
 
     python tools/deployment/export_onnx.py CONFIG CHECKPOINT --out FILE.onnx \\
         [--verify SAMPLE ...] [--sample-idx N | --sample-token TOKEN] \\
-        [--data-root DIR] [--export-seed S] [--opset 18] \\
+        [--data-root DIR] [--export-seed S] [--opset N] \\
         [--latency ROUNDS] [--threads T] [--cfg-options KEY=VALUE ...]
 
     # SDG-KL: the whole prediction path in one graph, checked on two
@@ -25,7 +25,8 @@ What is exported (docs/export.md):
   input that PyTorch computes beside the runtime (the JSON says so).
 * OccCylindrical: two graphs, ``FILE.onnx`` (the fused TPV planes -> plane
   encoder -> head -> occupancy) and ``FILE.camera.onnx`` (images ->
-  DepthNet's depth and context); the point branch and TPV-Polar-Fusion
+  DepthNet's depth and context; the paper configs' DCNv2 layers as ONNX
+  ``DeformConv``, opset 19); the point branch and TPV-Polar-Fusion
   between them run in PyTorch (the JSON and docs/export.md say why).
 
 The graph is traced with one synthetic sample of the config's shapes
@@ -107,7 +108,9 @@ def parse_args(argv=None):
         help='seed of the synthetic sample the graph is traced with '
         '(default 0)')
     parser.add_argument(
-        '--opset', type=int, default=None, help='ONNX opset (default 18)')
+        '--opset', type=int, default=None,
+        help='ONNX opset (default 18, or 19 for a graph with deformable '
+        'convolutions: ONNX DeformConv)')
     parser.add_argument(
         '--atol', type=float, default=ATOL,
         help=f'largest logit difference allowed (default {ATOL})')
@@ -259,6 +262,7 @@ def export_one(spec, feeds: dict, path: str, opset: int) -> Dict:
     return dict(
         onnx=osp.abspath(path),
         export_s=round(time.perf_counter() - start, 2),
+        opset=summary['opset'],
         nodes=summary['nodes'],
         bytes=summary['bytes'],
         ops=summary['ops'],
@@ -278,13 +282,12 @@ def main(argv=None) -> Dict:
     from mmengine.config import Config
     from mmengine.registry import init_default_scope
 
-    from projects.occ_common.deployment import (DEFAULT_OPSET, onnx_session,
-                                                synthetic_sample)
+    from projects.occ_common.deployment import onnx_session, synthetic_sample
     from projects.occ_common.engine.config_checks import apply_cfg_options
     from projects.occ_common.fileio.safe_pickle import RefusedGlobalError
     if args.threads:
         torch.set_num_threads(args.threads)
-    opset = args.opset or DEFAULT_OPSET
+    opset = args.opset  # None: each graph's own (required_opset)
     errors = (FileNotFoundError, ValueError, RefusedGlobalError)
     try:
         if not osp.isfile(args.config):
@@ -303,7 +306,6 @@ def main(argv=None) -> Dict:
         checkpoint=args.checkpoint,
         model=type(model).__name__,
         variant=getattr(model, 'variant', None),
-        opset=opset,
         exported_with=f'synthetic:{args.export_seed} ('
         f'{int(export_batch["inputs"]["points"][0].shape[0])} points)',
         points_time_dim=getattr(specs[0].module, 'time_dim', None),
@@ -318,7 +320,7 @@ def main(argv=None) -> Dict:
         report['graphs'][spec.part or 'prediction'] = graph
         sessions.append(onnx_session(path, args.threads))
         print(f'exported {path}: {graph["nodes"]} nodes, '
-              f'{graph["bytes"] / 2**20:.1f} MiB, opset {opset}, '
+              f'{graph["bytes"] / 2**20:.1f} MiB, opset {graph["opset"]}, '
               f'{graph["export_s"]} s')
         if spec.outside:
             print(f'outside the graph: {spec.outside}')

@@ -8,17 +8,11 @@ custom_imports = dict(imports=['projects.occ_common', 'projects.occ_cyl'],
 
 _img_stride = 16  # V is at 1/16 of the input (paper)
 _point_dims = 5  # x, y, z, intensity, time lag (merged sweeps, dataset)
-# Channel widths. The paper fixes only the total, 111.62 M parameters
-# (Table IV); these published defaults land at 111.9 M (tests/occ_cyl/
-# test_configs.py prints the count by module):
-# - 256 per FPN level: mmdet's FPN as in SurroundOcc / BEVDet;
-# - V = 512, DepthNet in = mid = 512: BEVDepth's ResNet-50 depth_net_conf,
-#   the DepthNet the paper takes from its ref. [15];
-# - 64 for the pseudo / LiDAR points: the lift-pool memory scales with it;
-# - 128 for the TPV planes and the head (the Swin input and FPN output);
-# - Swin-S (96 wide, depths 2-2-18-2): the paper says "swin-transformer"; a
-#   shared Swin-T cannot reach the budget (~99 M at most), Swin-B or three
-#   unshared Swin-T overshoot it.
+# Widths: the paper fixes only the total, 111.62 M (Table IV); published
+# defaults give 111.9 M: FPN 256 (mmdet's), V and DepthNet 512 (BEVDepth's
+# ResNet-50 DepthNet, ref. [15]), points 64 (lift-pool memory), planes 128,
+# Swin-S ("swin-transformer": Swin-T cannot reach the budget, Swin-B or
+# three Swin-T overshoot it).
 _img_channels, _v_channels = 256, 512
 _context_channels = _point_channels = 64
 _plane_channels = 128
@@ -35,23 +29,14 @@ model = dict(
     # (max - min) / step bins at 1, ..., 50 m, for DepthNet, the position
     # embedding (4 * D channels), the frustum and the depth loss.
     depth_bound=[1.0, 51.0, 1.0],
-    # The cylinder of the paper's ref. [18], PointOcc: 480 x 360 x 32 cells
-    # over r in [0, 50] m, theta in [-pi, pi], z in [-5, 3] m, outside points
-    # clamped to the border; radius the box's inscribed one (40 m on Occ3D),
-    # height the box's. It reproduces Table VI's pseudo-point counts within
-    # 5 % (tools/analysis_tools/benchmark_lift_pool.py --table6). Departure:
-    # 368 azimuth cells, so that every Swin level (strides 2 to 16) covers
-    # the azimuth exactly; the counts stay within 5 %.
+    # PointOcc's (ref. [18]) 480 x 360 x 32 cylinder, the box's inscribed
+    # radius and its height, outside points clamped; Table VI's pseudo-point
+    # counts within 5 %. 368 azimuth cells: every Swin level covers them.
     cylinder=dict(shape=[480, 368, 32], radius='inscribed', clamp=True),
-    # Pretrained weights (docs/train_test.md). The paper starts the ResNet-50
-    # from FCOS3D, whose released caffe-style ResNet-101-DCN does not fit:
-    # the nearest public start is torchvision's ImageNet ResNet-50, stage 1
-    # and BN statistics frozen as in FCOS3D / mmdet fine-tuning, DCN offsets
-    # at zero as in mmdet's mdconv configs. The paper does not say how its
-    # Swin starts; PointOcc's starts from ImageNet, and so does this one but
-    # for the RGB 4 x 4 patch embedding (ours takes 128 channels in 2 x 2
-    # patches). checkpoint=None trains from scratch (then frozen_stages=-1,
-    # norm_eval=False for the ResNet).
+    # Pretrained weights (docs/train_test.md): FCOS3D's caffe ResNet-101-DCN
+    # (the paper's) does not fit; torchvision's ImageNet ResNet-50, DCN
+    # offsets at zero (mmdet's mdconv). The Swin from ImageNet as PointOcc's,
+    # but for the RGB 4 x 4 patch embedding (ours: 128 channels, 2 x 2).
     pretrained=dict(
         img_backbone=dict(
             module='img_encoder.backbone', style='pytorch',
@@ -75,18 +60,17 @@ model = dict(
             type='RecomputedResNet', depth=50, num_stages=4,
             # Stages 0, 1, 2 and 3 feed the FPN (paper, Sec. IV.A).
             out_indices=(0, 1, 2, 3),
-            frozen_stages=1, norm_cfg=dict(type='BN', requires_grad=True),
+            # Stage 1 and BN statistics and affine frozen, as OCCFusion's
+            # (and mmdet's fine-tuning) ResNet.
+            frozen_stages=1, norm_cfg=dict(type='BN', requires_grad=False),
             norm_eval=True, style='pytorch',
-            # DCNv2 in stages 3 and 4: the paper cites DCN [21] beside its
-            # ResNet-50 and OCCFusion, its lineage, uses them there (+0.75 M
-            # parameters); in a float32 island, as mmcv's kernels have no
-            # bfloat16 (projects/occ_common/models/layers/float32_dcn.py).
+            # DCNv2 in stages 3-4: the paper cites DCN [21], OCCFusion uses
+            # them there (+0.75 M); float32 (mmcv has no bfloat16 kernels).
             dcn=dict(type='Float32DCNv2', deform_groups=1,
                      fallback_on_stride=False),
             stage_with_dcn=(False, False, True, True),
-            # Recompute each bottleneck in the backward (not in the paper)
-            # so that a 6 x 928 x 1600 iteration fits in memory; exact, as
-            # no BatchNorm statistic updates twice.
+            # Recompute each bottleneck in the backward (exact): a 6 x 928 x
+            # 1600 iteration fits in memory.
             with_cp=True, init_cfg=None),  # weights: `pretrained` above
         neck=dict(type='mmdet.FPN', in_channels=[256, 512, 1024, 2048],
                   out_channels=_img_channels, num_outs=4),
@@ -97,16 +81,13 @@ model = dict(
         type='DepthNet', in_channels=_v_channels, mid_channels=_v_channels,
         context_channels=_context_channels, with_depth_feature=True,
         camera_param_dims=22,  # BEVDepth's camera-aware depth
-        # Recompute the depth branch (~1.9 GiB of kept maps at 6 x 928 x
-        # 1600) in the backward: not in the paper, for memory; exact.
+        # Recompute the depth branch (~1.9 GiB kept otherwise; exact).
         with_cp=True),
     point_branch=dict(
         type='LidarPointBranch', in_channels=_point_dims,
         img_channels=_context_channels,
-        # The paper does not say how the raw attributes (metres, intensity
-        # 0-255, radians) are scaled; PointOcc and Cylinder3D batch-normalise
-        # them: 58.91 / 17.11 against 58.64 / 16.39 IoU / mIoU without (small
-        # config, 256 iterations, docs/reports/learning_benchmark.md).
+        # Raw attributes batch-normalised as PointOcc / Cylinder3D (the
+        # paper is silent): 17.11 against 16.39 mIoU without (small config).
         input_norm=True,
         geo_channels=(_point_channels, _point_channels),
         out_channels=(_point_channels, _point_channels)),
@@ -114,14 +95,15 @@ model = dict(
         type='TPVPolarFusion', cam_channels=_context_channels,
         lidar_channels=_point_channels, plane_channels=_plane_channels,
         num_groups=8,  # M of the spatial group pooling (paper, Table VII)
-        # Recompute the group pooling and its MLPs in the backward (~1.9
-        # GiB kept otherwise at the Table VI cylinder): for memory, exact.
+        # The lineage's forms: OCCFusion's squeeze-excitation fusion gate
+        # (C -> C/2 -> C) and PointOcc's group MLP (Linear-ReLU-Linear).
+        fusion_gate='squeeze_excite', group_mlp_norm=False,
+        # Recompute the group pooling and MLPs (~1.9 GiB kept otherwise).
         fused_lift=True, with_cp=True),
     tpv_encoder=dict(
         type='TPVPlaneEncoder',
         backbone=dict(
-            # mmdet.SwinTransformer recomputing non-reentrantly (mmdet's
-            # with_cp warns on every step).
+            # mmdet's Swin, recomputing non-reentrantly.
             type='RecomputedSwinTransformer', in_channels=_plane_channels,
             embed_dims=_swin_dims[0], depths=[2, 2, 18, 2],
             num_heads=[3, 6, 12, 24], window_size=7,
@@ -129,8 +111,7 @@ model = dict(
             # plane resolution, matching the 200x200x16 output better.
             patch_size=2, strides=(2, 2, 2, 2), out_indices=(0, 1, 2, 3),
             drop_path_rate=0.3,  # Swin-S's (Swin paper, mmdet configs)
-            # Recompute each block in the backward, for memory; exact (the
-            # drop-path masks are redrawn from the saved random state).
+            # Recompute each block (exact: drop-path masks redrawn).
             with_cp=True, init_cfg=None),  # weights: `pretrained` above
         neck=dict(type='mmdet.FPN', in_channels=_swin_dims,
                   out_channels=_plane_channels, num_outs=_num_scales)),
@@ -143,18 +124,14 @@ model = dict(
             dict(type='OccFocalLoss'), dict(type='OccLovaszLoss'),
             dict(type='SceneClassAffinityLoss', mode='geo'),
             dict(type='SceneClassAffinityLoss', mode='sem')])),
-    # Eq. 19: lambda = 3. The paper places bin k at 1 + k d metres but does
-    # not say which LiDAR depths train it: BEVDepth's floor would lift every
-    # depth half a bin too close on average, so each trains its nearest bin
-    # (small config, 2.5 m bins: 58.64 / 16.39 against 59.01 / 15.30 with
-    # floor; bins lifted at their centres instead 59.94 / 16.79).
+    # Eq. 19: lambda = 3. Each LiDAR depth trains its nearest bin point (the
+    # paper is silent; BEVDepth's floor: 15.30 against 16.39 mIoU, small).
     loss_depth=dict(type='DepthBCELoss', downsample=_img_stride,
                     loss_weight=3.0, nearest_bin=True))
 
-# Schedule: AdamW lr 5e-5, weight decay 0.01, multistep decay (paper). Epochs
-# and milestones are not given (the lineage decays with a cosine): x0.1 at
-# 20 and 23 of 24 is mmdet3d's usual multistep shape. The pretrained image
-# backbone learns at a tenth of the rate, as in SurroundOcc and OCCFusion.
+# AdamW lr 5e-5, weight decay 0.01, multistep decay (paper); milestones not
+# given: mmdet3d's x0.1 at 20, 23 of 24. Backbone at 0.1 x the rate, clip 35
+# and 500 warm-up iterations from 1/3: SurroundOcc's (OCCFusion: 5000, 1e-5).
 max_epochs = 24
 train_cfg = dict(type='EpochBasedTrainLoop', max_epochs=max_epochs,
                  val_interval=max_epochs)
@@ -172,19 +149,14 @@ param_scheduler = [
          milestones=[20, 23], gamma=0.1)]
 auto_scale_lr = dict(enable=False, base_batch_size=3)  # 3 GPUs x 1 (paper)
 
-# Inputs, which the paper configs apply to the dataset base's pipelines:
-# 1600x900 images (the dataset base crops to BEVDet's 256x704) and "10 LiDAR
-# sweeps", which the authors' OccFusion code loads as the key frame and 9
-# sweeps (LoadPointsFromMultiSweeps(sweeps_num=9)).
+# Inputs applied to the dataset base's pipelines: 1600x900 images and "10
+# LiDAR sweeps", as OCCFusion's code the key frame and 9 sweeps.
 paper_inputs = dict(
     MultiViewImageAug=dict(final_size=(900, 1600)),
     LoadOccPointsFromMultiSweeps=dict(sweeps_num=9))
-# Augmentation. The paper names none; its lineage (SurroundOcc, OCCFusion)
-# distorts each view's colours and moves no geometry, and so do the paper
-# configs: training images keep the test geometry (the midpoints of the
-# dataset base's ranges, no flip), no BEV flips (the small synthetic config:
-# 20.05 mIoU with, 25.57 without). ablations/occcyl-geoaug_* uses the
-# dataset base's geometric augmentation instead.
+# Augmentation (the paper names none): the lineage's (SurroundOcc,
+# OCCFusion) colour distortion per view, no geometric change (small config:
+# 20.05 mIoU with BEV flips, 25.57 without); ablations/occcyl-geoaug_* has it.
 lineage_train_aug = dict(
     MultiViewImageAug=dict(
         resize_range=(1.0, 1.0), crop_x_range=(0.5, 0.5), flip_prob=0.0,

@@ -27,7 +27,7 @@ model = dict(
     img_encoder=dict(
         backbone=dict(
             depth=18, base_channels=16, frozen_stages=-1, norm_eval=False,
-            norm_cfg=_img_norm,
+            norm_cfg=dict(_img_norm, requires_grad=True),
             # ResNet-18's basic blocks take no deformable conv.
             dcn=None, stage_with_dcn=(False, False, False, False),
             # A model this small needs no memory saving (nor do the modules
@@ -47,7 +47,9 @@ model = dict(
         out_channels=(_point_channels, _point_channels)),
     tpv_fusion=dict(
         cam_channels=_context_channels, lidar_channels=_point_channels,
-        plane_channels=_plane_channels, num_groups=4, with_cp=False),
+        plane_channels=_plane_channels, num_groups=4, with_cp=False,
+        # The benchmark rows' forms (before 2026-11-28), not the lineage's.
+        fusion_gate='conv', group_mlp_norm=True),
     tpv_encoder=dict(
         backbone=dict(
             in_channels=_plane_channels, embed_dims=_swin_dims[0],

@@ -1,22 +1,16 @@
-# SDG-Fusion (SDG-OCC, Duan et al., CVPR 2025) without a dataset: ResNet50
-# + FPN at 1/16 of the images, multi-task DepthNet, SDG view transform,
-# SPVCNN LiDAR BEV, neighbourhood-attention fusion with camera queries and
-# LiDAR keys / values, BEV encoder and FlashOcc's channel-to-height head;
-# AdamW 1e-4 with gradient clipping. A config adds a label format and merges
-# its coupled values and depth bins (`depth_bounds`) into `model`;
-# `kl_model` turns it into SDG-KL.
+# SDG-Fusion (SDG-OCC, Duan et al., CVPR 2025) without a dataset. A config
+# adds a label format and merges its coupled values and depth bins
+# (`depth_bounds`) into `model`; `kl_model` turns it into SDG-KL. Where the
+# paper is silent: projects/sdg_occ/README.md, departures.
 custom_imports = dict(imports=['projects.occ_common', 'projects.sdg_occ'],
                       allow_failed_imports=False)
 
 _img_stride = 16  # image features at 1/16 (paper)
-# 2D semantic classes: the 16 lidarseg classes 1..16 as projected by
-# PointsToSemanticMaps; 0 is eq. 2's "no class" (never a target: cells no
-# labelled return hits are ignored).
+# 2D semantic classes: "no class" 0 (eq. 2) and the 16 lidarseg classes.
 _num_seg_classes = 17
 _point_dims = 5  # x, y, z, intensity, time lag of the merged sweeps
-# Channel widths (not fixed by the paper): BEVDet-Occ / FlashOcc's 64-channel
-# camera BEV, 256-channel image and head features; the SPVCNN encoder's
-# default 128-channel LiDAR BEV.
+# Widths (not in the paper): BEVDet-Occ / FlashOcc's (the release's) camera
+# BEV, image and head features; the SPVCNN encoder's default LiDAR BEV.
 _img_channels = _bev_channels = 256
 _cam_channels, _lidar_channels = 64, 128
 
@@ -34,19 +28,22 @@ model = dict(
         # Whole backbone trained with live BN statistics, as BEVDet-Occ.
         frozen_stages=-1, norm_cfg=dict(type='BN', requires_grad=True),
         norm_eval=False, style='pytorch',
-        # Recomputation here, in the DepthNet and the LiDAR encoder (not in
-        # the paper, exact): a 6x256x704 iteration with 10 sweeps peaks at
-        # 3.8 GB instead of 6.0 GB for ~10 % more time
-        # (tools/analysis_tools/benchmark.py --train --synthetic-batch).
+        # Recomputation here, in the DepthNet and the LiDAR encoder (exact):
+        # 3.8 GB instead of 6.0 GB a 6x256x704 iteration, ~10 % more time.
         with_cp=True, init_cfg=None),  # weights: `pretrained` below
-    # ImageNet weights, as BEVDet-Occ, loaded and checked without torchvision
-    # (docs/train_test.md); checkpoint=None trains from scratch.
-    pretrained=dict(img_backbone=dict(
-        module='img_backbone', checkpoint='torchvision://resnet50',
-        style='pytorch', ignore=[r'^fc\.'])),  # the ImageNet classifier
-    # The FPN over the 1/16 and 1/32 stages, "down-sampled to 1/16"
-    # (Sec. 3.3): mmdet's FPN without the 1/32 output convolution, which
-    # nothing reads and whose unused weights DDP refuses.
+    # ImageNet weights, as BEVDet-Occ (docs/train_test.md). The release
+    # starts from BEVDet (`bevdet_pretrained` below) and SPVCNN from lidarseg
+    # (train ../pretrain/spvcnn_*, then set lidar_encoder's checkpoint);
+    # None: neither checkpoint is published.
+    pretrained=dict(
+        img_backbone=dict(
+            module='img_backbone', checkpoint='torchvision://resnet50',
+            style='pytorch', ignore=[r'^fc\.']),  # the ImageNet classifier
+        lidar_encoder=dict(module='lidar_encoder', checkpoint=None,
+                           prefix='lidar_encoder.',
+                           allow_missing=[r'^bev_proj\.'])),
+    # FPN "down-sampled to 1/16" (Sec. 3.3), without the unread 1/32 output
+    # conv (DDP refuses unused weights).
     img_neck=dict(type='SelectiveFPN', in_channels=[1024, 2048],
                   out_channels=_img_channels, out_indices=(0, )),
     depth_net=dict(
@@ -57,28 +54,24 @@ model = dict(
         seg_channels=_num_seg_classes, with_cp=True),
     view_transform=dict(
         type='SDGViewTransform',
-        # Semantic diffusion radius in 1/16 feature pixels (not fixed by the
-        # paper): 2 cells = 32 image pixels, about one object width at 20 m.
+        # Diffusion radius (not in the paper): 2 feature cells = 32 pixels,
+        # about one object width at 20 m.
         diffusion_radius=2.0,
-        # Bidirectional linear incremental discretization: r = 1 m, l = 8
-        # (paper, Table 4): 2 l + 1 = 17 virtual points 0.125 m apart.
+        # r = 1 m, l = 8 (paper, Table 4): 17 virtual points 0.125 m apart.
         layer_radius=1.0, num_layers=8, fallback='lss', use_sdg=True),
     lidar_encoder=dict(
         type='SPVCNNEncoder', in_channels=_point_dims,
-        # SDG-OCC's 0.1 m voxels; two stride-2 stages reach Occ3D's 0.4 m
-        # BEV cell.
+        # The release's 0.1 m voxels; two stride-2 stages reach 0.4 m cells.
         voxel_size=[0.1, 0.1, 0.1], stage_strides=(2, 2),
         out_channels=_lidar_channels, with_cp=True,
-        # "Voxelization and normalization" (Sec. 3.5): each point's offsets
-        # to its voxel's mean and centre, as in the authors' code.
+        # "Voxelization and normalization" (Sec. 3.5) as the release: each
+        # point's offsets to its voxel's mean and centre.
         point_offsets=True),
     fusion=dict(
         type='NeighborhoodFusion',
-        # The widths come from the detector: camera BEV queries, LiDAR BEV
-        # keys / values for SDG-Fusion (swapped for SDG-KL's teacher).
-        # Attention width (not given by the paper): the camera BEV's 64
-        # channels in 4 heads of 16, NAT's head width.
-        embed_dims=64, num_heads=4,
+        # Widths from the detector. Not in the paper: the release's three
+        # layers 256 wide in 8 heads (NATBlock(dim=256, depth=3, heads=8)).
+        embed_dims=256, num_heads=8, num_layers=3,
         kernel_size=7),  # neighbourhood k = 7 (paper, Table 5)
     bev_encoder=dict(
         type='SDGBEVEncoder', in_channels=_cam_channels,
@@ -91,10 +84,13 @@ model = dict(
         type='ChannelToHeightHead', in_channels=_bev_channels,
         mid_channels=_bev_channels,
         num_convs=1,  # FlashOcc's single 3x3 conv before the predictor
-        # FlashOcc's masked cross-entropy on Occ3D (focal with gamma = 0);
-        # add OccLovaszLoss / SceneClassAffinityLoss entries to use them.
+        # FlashOcc's masked cross-entropy on Occ3D (focal, gamma = 0).
         loss_occ=dict(type='OccupancyLoss', losses=[
             dict(type='OccFocalLoss', gamma=0.0, loss_weight=1.0)])),
+    # Not in the paper: the release's point segmentation loss on SPVCNN
+    # (lidarseg labels, x0.1; it adds Lovasz); needs nuScenes-lidarseg.
+    point_seg_head=dict(type='PointSegHead', num_classes=_num_seg_classes,
+                        loss_weight=0.1),
     # The paper gives neither loss weight; 0.05 (depth) is the authors'
     # partial release's (BEVDet-Occ's), 0.5 (2D semantics) the release's.
     loss_depth=dict(type='DepthBCELoss', downsample=_img_stride,
@@ -102,53 +98,51 @@ model = dict(
     loss_seg=dict(type='mmdet.CrossEntropyLoss', ignore_index=255,
                   avg_non_ignore=True, loss_weight=0.5))
 
-# Depth bins per label grid (min, max, step in metres; not given by the
-# paper), which the dataset configs merge into `model`: on Occ3D those of
-# BEVDet-Occ / FlashOcc, which SDG-OCC builds on, 1..45 m at 0.5 m (88
-# bins); on SurroundOcc BEVDet's nuScenes 1..60 m at 0.5 m (118 bins),
-# which covers the 50 m grid along every camera axis.
-depth_bounds = dict(occ3d=[1.0, 45.0, 0.5], surroundocc=[1.0, 60.0, 0.5])
+# Depth bins (not in the paper): the release's 1..45 m, D = 88, on Occ3D;
+# BEVDet's nuScenes 1..60 m on SurroundOcc (its 50 m grid); log-spaced as
+# the release's `sid=True` (projects/occ_common/geometry/depth.py).
+depth_bounds = dict(occ3d=[1.0, 45.0, 0.5, 'sid'],
+                    surroundocc=[1.0, 60.0, 0.5, 'sid'])
 
-# SDG-KL: SDG-Fusion's network trained with a LiDAR-dominant fusion (LiDAR
-# queries, camera keys / values; the detector swaps the widths) as a teacher
-# and FOAD distillation into the camera BEV; inference skips the SPVCNN branch
-# and the fusion. The distillation loss makes the model SDG-KL (SDGOcc reads
-# its variant off its sub-modules). The *sdgocc-kl_* configs merge it into
-# `model`.
+# SDG-KL (merged into `model` by the sdgocc-kl_* configs): a LiDAR-led
+# fusion teacher distilled into the camera BEV by FOAD; inference skips the
+# SPVCNN branch and the fusion.
 kl_model = dict(
-    # alpha, beta and the loss weight are not fixed by the paper: the
-    # N_AR / N_IR balance already equalises the two regions, so both
-    # regions start at weight 1.
+    # alpha, beta, weight not in the paper: N_AR / N_IR already balances the
+    # regions. Eq. 8 on the raw features (docs/reports/learning_benchmark.md).
     loss_distill=dict(type='FOADDistillLoss', alpha=1.0, beta=1.0,
                       loss_weight=1.0),
-    # The teacher must learn occupancy for its features to be worth
-    # distilling; it gets the same weight as the student's head.
-    teacher_loss_weight=1.0,
-    # The teacher decodes with its own BEV encoder and head (training only;
-    # the paper does not say whether the two share them): shared, the small
-    # configs' student plateaued at 10.4 mIoU by 800 iterations, below the
-    # camera-only LSS row (13.5); with its own head it reached 14.0 at 800
-    # (learning benchmark). Keeping the teacher's loss out of the camera
-    # branch instead (detach_teacher_camera) did not help.
-    separate_teacher_head=True)
-# SDG-OCC Table 3's camera rows (ablations/sdgocc-camera-*): no LiDAR
-# encoder, no fusion. "+SDG" keeps the SDG lift (LiDAR points still guide
-# it); the Baseline is the plain LSS lift, without which nothing uses the
-# 2D semantics, so no semantic head or loss_seg (FlashOcc has none); depth
-# supervision stays (FlashOcc's BEVDepth-style DepthNet has it).
-camera_sdg_model = dict(lidar_encoder=None, fusion=None)
-camera_lss_model = dict(
-    camera_sdg_model, view_transform=dict(use_sdg=False),
-    depth_net=dict(seg_channels=0), loss_seg=None)
+    # "The sum of distillation and classification loss" (Sec. 3.5): one
+    # occupancy loss, on the fused BEV through the one head the camera BEV
+    # uses at inference, as the release. Before 2026-11-28: 'three_loss'
+    # with separate_teacher_head=True.
+    kl_losses='paper')
+# Table 3's rows without SDG (ablations/*-lss*): the plain LSS lift, no 2D
+# semantics (as FlashOcc), depth supervision kept. The camera rows have no
+# LiDAR encoder or fusion; "+SDG" keeps the SDG lift (LiDAR-guided).
+lss_lift_model = dict(view_transform=dict(use_sdg=False),
+                      depth_net=dict(seg_channels=0), loss_seg=None)
+camera_sdg_model = dict(lidar_encoder=None, fusion=None, point_seg_head=None,
+                        pretrained=dict(lidar_encoder=None))
+camera_lss_model = dict(camera_sdg_model, **lss_lift_model)
+# The release's camera start (load_from BEVDet-R50-CBGS): ResNet, FPN, BEV
+# residual blocks (renamed). Not the default: the file has no URL. Use:
+# model = dict(pretrained=bevdet_pretrained).
+_bevdet = 'checkpoints/bevdet-r50-cbgs.pth'
+bevdet_pretrained = dict(
+    img_backbone=dict(module='img_backbone', checkpoint=_bevdet,
+                      prefix='img_backbone.', style='pytorch'),
+    img_neck=dict(module='img_neck', checkpoint=_bevdet, prefix='img_neck.'),
+    bev_encoder=dict(
+        module='bev_encoder', checkpoint=_bevdet,
+        prefix='img_bev_encoder_backbone.',
+        key_map=[(r'^layers\.', 'stages.')], ignore=[r'\.downsample\.'],
+        allow_missing=[r'\.shortcut\.', r'^merges\.', r'^out\.']))
 
-# Schedule: AdamW lr 1e-4 with gradient clipping (paper); weight decay, clip
-# norm, warm-up and 24 epochs follow BEVDet-Occ / FlashOcc; 4 GPUs x 2 samples
-# is an assumption, hence auto_scale_lr (off unless tools/train.py
-# --auto-scale-lr, mmdet3d's convention; the paper's rate is one RTX 4090's).
-# Differences from the authors' partial release, kept as no config had been
-# trained on nuScenes to compare them (commit 41311d5): 24 epochs (release: 48,
-# 36 with 4D stereo), clip norm 5 (release: 2), no EMA (add mmdet's EMAHook to
-# custom_hooks), the key frame plus 10 sweeps (release: the key frame only).
+# AdamW lr 1e-4 with clipping (paper); decay, clip norm, warm-up and 24
+# epochs as BEVDet-Occ / FlashOcc; 4 x 2 samples assumed (auto_scale_lr).
+# Kept against the release (untrained, 41311d5): 24 epochs (48), clip 5 (2),
+# no EMA, the key frame plus 10 sweeps (the key frame only).
 max_epochs = 24
 train_cfg = dict(type='EpochBasedTrainLoop', max_epochs=max_epochs,
                  val_interval=max_epochs)

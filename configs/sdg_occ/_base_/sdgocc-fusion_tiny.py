@@ -14,6 +14,7 @@ tiny_model = dict(
         # recomputation would only cost time.
         with_cp=False),
     pretrained=None,  # no download: trained from scratch
+    point_seg_head=None,
     img_neck=dict(in_channels=[32, 64], out_channels=_tiny_img_channels),
     depth_net=dict(
         in_channels=_tiny_img_channels, mid_channels=_tiny_img_channels,
@@ -26,7 +27,7 @@ tiny_model = dict(
         stage_channels=(_tiny_lidar_channels, _tiny_lidar_channels),
         stage_strides=(1, 1), out_channels=_tiny_lidar_channels,
         with_cp=False),
-    fusion=dict(embed_dims=16, num_heads=2),
+    fusion=dict(embed_dims=16, num_heads=2, num_layers=1),
     bev_encoder=dict(
         in_channels=_tiny_cam_channels,
         stage_channels=[_tiny_cam_channels * 2, _tiny_cam_channels * 4],

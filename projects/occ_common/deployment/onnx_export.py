@@ -19,9 +19,12 @@ import torch
 from torch import Tensor, nn
 
 from ..utils.device_path import forced_accelerator_path
+from .deform_conv import (DEFORM_CONV_OPSET, deformable_convs,
+                          exportable_deform_convs)
 
 #: Opset of the exported graphs: ``ScatterElements(reduction='max' /
-#: 'min')`` needs 18.
+#: 'min')`` needs 18; a graph with deformable convolutions gets
+#: :data:`~.deform_conv.DEFORM_CONV_OPSET` (19, ``DeformConv``).
 DEFAULT_OPSET = 18
 
 
@@ -32,7 +35,7 @@ def export_graph(module: nn.Module,
                  output_names: Sequence[str],
                  dynamic_axes: Optional[Mapping[str, Mapping[int,
                                                              str]]] = None,
-                 opset: int = DEFAULT_OPSET) -> str:
+                 opset: Optional[int] = None) -> str:
     """Trace ``module(*args)`` on the GPU code path and write ONNX.
 
     Args:
@@ -44,20 +47,54 @@ def export_graph(module: nn.Module,
         dynamic_axes (Mapping, optional): Input / output name -> axis ->
             symbolic name, e.g. ``{'points': {0: 'num_points'}}``.
             Defaults to None (all static).
-        opset (int): ONNX opset. Defaults to :data:`DEFAULT_OPSET`.
+        opset (int, optional): ONNX opset. Defaults to
+            :func:`required_opset`'s, lowered to :data:`DEFAULT_OPSET`
+            when the traced graph holds no ``DeformConv`` (the module's
+            deformable convolutions are not called).
 
     Returns:
         str: ``path``.
+
+    Raises:
+        ValueError: An opset below 19 for a module with deformable
+            convolutions (ONNX ``DeformConv``), naming them.
     """
-    refuse_deformable_convs(module)
+    requested, needed = opset, required_opset(module)
+    opset = needed if opset is None else int(opset)
+    if opset < needed:
+        names = deformable_convs(module)
+        raise ValueError(
+            f'{len(names)} deformable convolutions (mmcv DCN), e.g. '
+            f'{names[:3]}, export as ONNX DeformConv, which needs opset '
+            f'{DEFORM_CONV_OPSET}; got opset {opset}')
     # The exporter restores the module's mode afterwards: a wrapper left in
     # training mode would put the whole model back into it.
     module.eval()
     folder = osp.dirname(osp.abspath(path))
     os.makedirs(folder, exist_ok=True)
+    _trace(module, args, path, input_names, output_names, dynamic_axes,
+           opset)
+    if (requested is None and opset > DEFAULT_OPSET
+            and 'DeformConv' not in graph_summary(path)['ops']):
+        # The module holds deformable convolutions its forward does not
+        # call (a graph of one part of a model, as OccCylindrical's plane
+        # graph): traced again at the default opset, which more runtimes
+        # read.
+        opset = DEFAULT_OPSET
+        _trace(module, args, path, input_names, output_names, dynamic_axes,
+               opset)
+    constants_to_initializers(path)
+    return path
+
+
+def _trace(module: nn.Module, args: Sequence[Tensor], path: str,
+           input_names: Sequence[str], output_names: Sequence[str],
+           dynamic_axes: Optional[Mapping], opset: int) -> None:
+    """``torch.onnx.export`` of ``module(*args)`` on the GPU code path, its
+    deformable convolutions as ONNX ``DeformConv``."""
     torch.onnx.register_custom_op_symbolic('aten::hypot', _hypot, opset)
     with torch.no_grad(), forced_accelerator_path(True), \
-            warnings.catch_warnings():
+            exportable_deform_convs(module), warnings.catch_warnings():
         # The legacy exporter's deprecation notice, the tracer's notes on
         # Python values (shapes and sizes, static by design) and
         # index_add's duplicate-index warning (only index_copy remains,
@@ -73,35 +110,13 @@ def export_graph(module: nn.Module,
             opset_version=int(opset),
             do_constant_folding=True,
             dynamo=False)
-    constants_to_initializers(path)
-    return path
 
 
-def refuse_deformable_convs(module: nn.Module) -> None:
-    """Raise, naming them, if ``module`` holds mmcv's deformable convs.
-
-    ONNX's standard operators do not cover mmcv's (modulated) deformable
-    convolution: mmcv writes its own custom operator, which onnxruntime
-    does not run without mmcv's operator library, and the legacy exporter
-    fails on it with an unrelated AttributeError. OccCylindrical's paper
-    configs have DCNv2 in ResNet stages 3-4.
-
-    Raises:
-        ValueError: Naming the first such layers and what to do.
-    """
-    from mmcv.ops import DeformConv2d, ModulatedDeformConv2d
-    names = [
-        name for name, child in module.named_modules()
-        if isinstance(child, (DeformConv2d, ModulatedDeformConv2d))
-    ]
-    if names:
-        raise ValueError(
-            f'{len(names)} deformable convolutions (mmcv DCN), e.g. '
-            f'{names[:3]}: ONNX export covers models without them (mmcv '
-            'exports DCN as its own custom operator, which onnxruntime '
-            'cannot run). Export a config whose image backbone has '
-            'dcn=None and stage_with_dcn all False, with weights trained '
-            'that way.')
+def required_opset(module: nn.Module) -> int:
+    """The lowest opset :func:`export_graph` writes ``module`` with:
+    :data:`DEFAULT_OPSET`, or ``DeformConv``'s 19 when it holds mmcv's
+    deformable convolutions."""
+    return DEFORM_CONV_OPSET if deformable_convs(module) else DEFAULT_OPSET
 
 
 def _hypot(g, x, y):

@@ -26,7 +26,8 @@ from typing import Dict, Sequence
 import torch
 from torch import Tensor
 
-from ..geometry.depth import (depth_bin_values, depth_to_bins, num_depth_bins,
+from ..geometry.depth import (depth_bin_values, depth_to_bins,
+                              normalize_depth_bound, num_depth_bins,
                               patch_min_depth)
 
 
@@ -39,7 +40,7 @@ class DepthBinAccuracy:
     """
 
     def __init__(self, depth_bound: Sequence[float]) -> None:
-        self.depth_bound = tuple(float(v) for v in depth_bound)
+        self.depth_bound = normalize_depth_bound(depth_bound)
         self.num_bins = num_depth_bins(self.depth_bound)
         self._points = depth_bin_values(self.depth_bound).double()
         self._sums = dict(cells=0, top1=0, within_one_bin=0, prob_true=0.0,

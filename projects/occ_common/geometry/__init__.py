@@ -9,15 +9,17 @@ synthetic world's masks and the occupancy label generator), imported from
 its module.
 """
 from .bev_warp import relative_pose, warp_bev
-from .depth import (depth_bin_values, depth_to_bins, nearest_depth_map,
-                    num_depth_bins, patch_min_depth, project_nearest,
-                    project_points)
+from .depth import (DEPTH_SPACINGS, depth_bin_coordinate, depth_bin_values,
+                    depth_to_bins, nearest_depth_map, normalize_depth_bound,
+                    num_depth_bins, parse_depth_bound, patch_min_depth,
+                    project_nearest, project_points)
 from .inverse import inverse_4x4, invert_matrix
 from .seg_targets import downsample_seg_labels
 
 __all__ = [
-    'depth_bin_values', 'depth_to_bins', 'downsample_seg_labels',
-    'inverse_4x4', 'invert_matrix', 'nearest_depth_map',
-    'num_depth_bins', 'patch_min_depth', 'project_nearest', 'project_points',
-    'relative_pose', 'warp_bev'
+    'DEPTH_SPACINGS', 'depth_bin_coordinate', 'depth_bin_values',
+    'depth_to_bins', 'downsample_seg_labels', 'inverse_4x4', 'invert_matrix',
+    'nearest_depth_map', 'normalize_depth_bound', 'num_depth_bins',
+    'parse_depth_bound', 'patch_min_depth', 'project_nearest',
+    'project_points', 'relative_pose', 'warp_bev'
 ]

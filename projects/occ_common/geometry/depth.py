@@ -19,6 +19,13 @@ Conventions:
   ``[min + k * step, min + (k + 1) * step)`` and lifted at its near edge
   ``min + k * step``. OccCylindrical's 50 bins "from 1 m to 50 m" at
   d = 1 m are therefore ``(1, 51, 1)``.
+* ``depth_bound = (min, max, step, 'sid')`` keeps the D bins but spaces
+  them as BEVDet's ``sid=True`` (spacing-increasing discretization, Fu et
+  al., DORN, CVPR 2018), which SDG-OCC's release uses: bin ``k`` is lifted
+  at ``min * ((max - 1) / min) ** (k / (D - 1))`` (BEVDet's last point is
+  ``max - 1`` m) and covers the depths up to the next bin's point, so the
+  near bins are finer than the far ones. Every function here reads either
+  form (:func:`depth_bin_coordinate`).
 """
 from typing import Optional, Sequence, Tuple, Union
 
@@ -33,41 +40,119 @@ from ..utils.precision import float32_math
 ArrayOrTensor = Union[np.ndarray, Tensor]
 
 
-def num_depth_bins(depth_bound: Sequence[float]) -> int:
-    """Number of depth bins D = round((dmax - dmin) / step).
+#: The depth bin spacings of a ``depth_bound``'s optional fourth entry.
+DEPTH_SPACINGS = ('uniform', 'sid')
+
+
+def parse_depth_bound(depth_bound: Sequence) -> Tuple[float, float, float,
+                                                      str]:
+    """``(dmin, dmax, step, spacing)`` of a checked depth bound.
 
     Args:
-        depth_bound (Sequence[float]): ``(dmin, dmax, step)`` in metres.
+        depth_bound (Sequence): ``(dmin, dmax, step)`` in metres, or
+            ``(dmin, dmax, step, spacing)`` with a spacing of
+            :data:`DEPTH_SPACINGS` (``'uniform'`` without one).
+
+    Returns:
+        tuple: The three floats and the spacing.
+
+    Raises:
+        ValueError: If the bound is not three numbers with dmin < dmax and
+            step > 0 (and, for ``'sid'``, dmin > 0 and dmax - 1 > dmin),
+            or names another spacing.
+    """
+    if len(depth_bound) not in (3, 4):
+        raise ValueError('expected depth_bound = (dmin, dmax, step) or '
+                         f'(dmin, dmax, step, spacing), got {depth_bound!r}.')
+    spacing = depth_bound[3] if len(depth_bound) == 4 else 'uniform'
+    if spacing not in DEPTH_SPACINGS:
+        raise ValueError(f'depth_bound spacing must be one of '
+                         f'{DEPTH_SPACINGS}, got {depth_bound!r}.')
+    dmin, dmax, step = (float(v) for v in depth_bound[:3])
+    if not (step > 0 and dmax > dmin):
+        raise ValueError('expected depth_bound with dmin < dmax and step > 0,'
+                         f' got {depth_bound!r}.')
+    if spacing == 'sid' and not (dmin > 0 and dmax - 1 > dmin):
+        raise ValueError("depth_bound with 'sid' spacing needs 0 < dmin < "
+                         f'dmax - 1 (log-spaced points), got {depth_bound!r}.')
+    return dmin, dmax, step, spacing
+
+
+def normalize_depth_bound(depth_bound: Sequence) -> tuple:
+    """The bound as stored and compared: three floats, plus ``'sid'`` for
+    that spacing (a ``'uniform'`` entry is dropped, so both spellings of
+    uniform bins compare equal)."""
+    dmin, dmax, step, spacing = parse_depth_bound(depth_bound)
+    return (dmin, dmax, step) + ((spacing, ) if spacing != 'uniform' else ())
+
+
+def num_depth_bins(depth_bound: Sequence) -> int:
+    """Number of depth bins D = round((dmax - dmin) / step), either spacing.
+
+    Args:
+        depth_bound (Sequence): ``(dmin, dmax, step[, spacing])`` in
+            metres.
 
     Returns:
         int: D.
 
     Raises:
-        ValueError: If the bound is not three numbers with dmin < dmax and
-            step > 0.
+        ValueError: From :func:`parse_depth_bound`.
     """
-    if len(depth_bound) != 3:
-        raise ValueError('expected depth_bound = (dmin, dmax, step), got '
-                         f'{depth_bound!r}.')
-    dmin, dmax, step = (float(v) for v in depth_bound)
-    if not (step > 0 and dmax > dmin):
-        raise ValueError('expected depth_bound with dmin < dmax and step > 0,'
-                         f' got {depth_bound!r}.')
-    return int(round((dmax - dmin) / step))
+    dmin, dmax, step, spacing = parse_depth_bound(depth_bound)
+    num = int(round((dmax - dmin) / step))
+    if spacing == 'sid' and num < 2:
+        raise ValueError("depth_bound with 'sid' spacing needs at least 2 "
+                         f'bins, got {depth_bound!r}.')
+    return num
 
 
-def depth_bin_values(depth_bound: Sequence[float]) -> Tensor:
-    """Depth of every bin, ``min + k * step``.
+def _sid_log_ratio(dmin: float, dmax: float) -> float:
+    """``log((dmax - 1) / dmin)``: the log-depth span of BEVDet's SID."""
+    return float(np.log((dmax - 1.0) / dmin))
+
+
+def depth_bin_values(depth_bound: Sequence) -> Tensor:
+    """Depth at which every bin is lifted: ``min + k * step``, or the
+    SID points ``min * ((max - 1) / min) ** (k / (D - 1))``.
 
     Args:
-        depth_bound (Sequence[float]): ``(min, max, step)`` in metres.
+        depth_bound (Sequence): ``(min, max, step[, spacing])`` in metres.
 
     Returns:
-        Tensor: Depths in metres. Shape (D,).
+        Tensor: Depths in metres, float32. Shape (D,).
     """
     num = num_depth_bins(depth_bound)
-    d_min, step = float(depth_bound[0]), float(depth_bound[2])
-    return d_min + step * torch.arange(num, dtype=torch.float32)
+    dmin, dmax, step, spacing = parse_depth_bound(depth_bound)
+    k = torch.arange(num, dtype=torch.float32)
+    if spacing == 'sid':
+        return torch.exp(np.log(dmin) + k / (num - 1) *
+                         _sid_log_ratio(dmin, dmax))
+    return dmin + step * k
+
+
+def depth_bin_coordinate(depth: Tensor, depth_bound: Sequence) -> Tensor:
+    """Continuous bin index of depths: bin ``k``'s point is at ``k``.
+
+    ``(d - min) / step`` for uniform bins; ``(D - 1) * log(d / min) /
+    log((max - 1) / min)`` for SID ones (depths <= 0 give -inf there).
+    ``floor`` of it is the bin a depth falls in (BEVDepth's and BEVDet's
+    targets), and the linear interpolation between bins ``floor`` and
+    ``floor + 1`` runs on it.
+
+    Args:
+        depth (Tensor): Depths in metres, any shape.
+        depth_bound (Sequence): ``(min, max, step[, spacing])``.
+
+    Returns:
+        Tensor: Same shape and dtype as ``depth``.
+    """
+    num = num_depth_bins(depth_bound)
+    dmin, dmax, step, spacing = parse_depth_bound(depth_bound)
+    if spacing == 'sid':
+        scale = (num - 1) / _sid_log_ratio(dmin, dmax)
+        return torch.log(depth / dmin) * scale
+    return (depth - dmin) / step
 
 
 class _Ops:
@@ -329,9 +414,11 @@ def depth_to_bins(gt_depth: Tensor,
     """One-hot depth-bin targets of the feature pixels, as in BEVDepth.
 
     Each feature pixel takes the nearest LiDAR depth d of its patch
-    (:func:`patch_min_depth`) and the bin ``k = floor((d - dmin) / step)``;
-    pixels without a return or with k outside ``[0, D)`` (d < dmin or
-    d >= dmin + D * step) get an all-zero row and ``valid = False``.
+    (:func:`patch_min_depth`) and the bin ``k = floor((d - dmin) / step)``
+    (for SID bins ``floor`` of :func:`depth_bin_coordinate`, as BEVDet's
+    ``sid`` targets); pixels without a return or with k outside ``[0, D)``
+    (d < dmin or d >= dmin + D * step) get an all-zero row and
+    ``valid = False``.
 
     The models lift bin ``k`` at ``dmin + k * step``
     (:func:`depth_bin_values`), so BEVDepth's ``floor`` trains every depth
@@ -345,7 +432,8 @@ def depth_to_bins(gt_depth: Tensor,
         gt_depth (Tensor): Sparse LiDAR depth map, 0 where there is no
             return. Shape (B*N, H, W).
         downsample (int): Feature stride.
-        depth_bound (Sequence[float]): ``(dmin, dmax, step)`` in metres.
+        depth_bound (Sequence): ``(dmin, dmax, step[, spacing])`` in
+            metres.
         nearest_bin (bool): Round to the nearest bin point instead of
             BEVDepth's ``floor``. Defaults to False.
 
@@ -355,9 +443,11 @@ def depth_to_bins(gt_depth: Tensor,
         mask of pixels with a target, shape (B*N*h*w,).
     """
     num_bins = num_depth_bins(depth_bound)
-    dmin, _, step = (float(v) for v in depth_bound)
     nearest = patch_min_depth(gt_depth, downsample).reshape(-1)
-    bins = torch.floor((nearest - dmin) / step + (0.5 if nearest_bin else 0))
+    # A pixel without a return (depth 0) is invalid whatever its coordinate
+    # (-inf for SID bins); the clamp keeps the log finite.
+    coord = depth_bin_coordinate(nearest.clamp(min=1e-6), depth_bound)
+    bins = torch.floor(coord + (0.5 if nearest_bin else 0))
     valid = (nearest > 0) & (bins >= 0) & (bins < num_bins)
     index = torch.where(valid, bins, torch.zeros_like(bins)).long()
     onehot = F.one_hot(index, num_bins).to(gt_depth.dtype)

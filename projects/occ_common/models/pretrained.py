@@ -13,6 +13,8 @@ entry per part::
                                   # normalisation the weights need
             ignore=[r'^fc\\.'],    # checkpoint keys not to load (reported)
             allow_missing=[],     # module keys the file may lack
+            key_map=[],           # (pattern, replacement) renames of the
+                                  # file's keys, e.g. another codebase's
             tolerance=0))         # further differing keys accepted
 
 mmengine's ``init_cfg=dict(type='Pretrained')`` loads with
@@ -24,9 +26,15 @@ patches, not RGB in 4 x 4, and ``load_state_dict`` raises on the shape).
 Here instead:
 
 * without a checkpoint the part keeps its initialisation and must train
-  normally: frozen stages or frozen BN statistics (``frozen_stages >= 0``,
-  ``norm_eval=True``) are refused, they would freeze random weights;
-* with one, the keys and shapes are compared first. Keys matching
+  normally: frozen stages, frozen BN statistics or any parameter that
+  does not train (``frozen_stages >= 0``, ``norm_eval=True``, a
+  ``norm_cfg`` with ``requires_grad=False``) are refused, they would
+  freeze random weights;
+* with one, the file's keys are renamed by ``key_map`` (after ``prefix``:
+  each ``(pattern, replacement)`` pair is applied with :func:`re.sub`, in
+  order, so a checkpoint of another codebase whose layers carry other
+  names can load; two keys renamed alike are refused), then keys and
+  shapes are compared. Keys matching
   ``ignore`` are not loaded and reported (a classifier head, a patch
   embedding of another shape), module keys matching ``allow_missing`` keep
   their initialisation and are reported; any other missing, unexpected or
@@ -79,6 +87,7 @@ _DEFAULTS = dict(
     style=None,
     ignore=(),
     allow_missing=(),
+    key_map=(),
     tolerance=0)
 _SHOWN = 10  # keys named in a message
 
@@ -93,7 +102,8 @@ def check_entries(pretrained: Optional[Mapping]) -> Dict[str, dict]:
 
     Args:
         pretrained (Mapping, optional): Entry name -> dict with ``module``
-            and the optional keys of the module docstring.
+            and the optional keys of the module docstring, or None to drop
+            the entry (a config without that part).
 
     Returns:
         dict[str, dict]: Entries with every key filled in.
@@ -103,6 +113,8 @@ def check_entries(pretrained: Optional[Mapping]) -> Dict[str, dict]:
     """
     entries = {}
     for name, entry in (pretrained or {}).items():
+        if entry is None:
+            continue  # dropped, e.g. by a config that removes the part
         if not isinstance(entry, Mapping) or 'module' not in entry:
             raise ValueError(f'pretrained.{name} must be a dict with a '
                              f'"module" path, got {entry!r}')
@@ -125,8 +137,53 @@ def check_entries(pretrained: Optional[Mapping]) -> Dict[str, dict]:
                 raise ValueError(f'pretrained.{name}.{key} must be a list of '
                                  f'patterns, got the string {full[key]!r}')
             full[key] = tuple(re.compile(p) for p in full[key])
+        full['key_map'] = _check_key_map(name, full['key_map'])
         entries[name] = full
     return entries
+
+
+def _check_key_map(name: str,
+                   key_map) -> Tuple[Tuple[re.Pattern, str], ...]:
+    """Compiled ``(pattern, replacement)`` pairs of an entry's
+    ``key_map``."""
+    pairs = []
+    for pair in key_map:
+        if isinstance(pair, str) or len(pair) != 2 or not all(
+                isinstance(p, str) for p in pair):
+            raise ValueError(f'pretrained.{name}.key_map must be a list of '
+                             f'(pattern, replacement) string pairs, got '
+                             f'{pair!r}')
+        pairs.append((re.compile(pair[0]), pair[1]))
+    return tuple(pairs)
+
+
+def rename_keys(state: Mapping[str, Tensor], key_map, where: str
+                ) -> Dict[str, Tensor]:
+    """A checkpoint's tensors under the names ``key_map`` gives them.
+
+    Args:
+        state (Mapping[str, Tensor]): Key -> tensor.
+        key_map (Sequence): Compiled ``(pattern, replacement)`` pairs,
+            applied with :func:`re.sub` in order.
+        where (str): The entry and file, for messages.
+
+    Returns:
+        dict[str, Tensor]: Renamed key -> tensor.
+
+    Raises:
+        PretrainedMismatchError: When two keys get the same name.
+    """
+    renamed = {}
+    for key, value in state.items():
+        new = key
+        for pattern, replacement in key_map:
+            new = pattern.sub(replacement, new)
+        if new in renamed:
+            raise PretrainedMismatchError(
+                f'{where}: key_map gives two of the file\'s keys the name '
+                f'{new!r} (one of them {key!r})')
+        renamed[new] = value
+    return renamed
 
 
 def resolve_checkpoint(checkpoint: str) -> str:
@@ -262,6 +319,14 @@ def _check_trains_normally(module: nn.Module, name: str) -> None:
             f'norm_eval={norm_eval}: that would freeze randomly initialised '
             'layers and BN statistics. Give the entry a checkpoint, or set '
             'frozen_stages=-1 and norm_eval=False to train it from scratch')
+    fixed = [n for n, p in module.named_parameters() if not p.requires_grad]
+    if fixed:
+        raise ValueError(
+            f'pretrained.{name}: no checkpoint, but {len(fixed)} parameters '
+            f'of {type(module).__name__} do not train (first: {fixed[0]}; '
+            'e.g. norm_cfg=dict(..., requires_grad=False)): they would '
+            'stay at their initialisation. Give the entry a checkpoint, or '
+            'let them train (norm_cfg requires_grad=True)')
 
 
 def _describe(key, theirs: Mapping, own: Mapping) -> str:
@@ -304,6 +369,9 @@ def load_pretrained(module: nn.Module,
     check_style(module, name, entry['style'], data_preprocessor)
     path = resolve_checkpoint(entry['checkpoint'])
     theirs = checkpoint_state_dict(path, entry['prefix'])
+    if entry['key_map']:
+        theirs = rename_keys(theirs, entry['key_map'],
+                             f'pretrained.{name} ({path})')
     if _is_swin(module) and any(k.startswith('layers.') for k in theirs):
         from mmdet.models.backbones.swin import swin_converter
         theirs = {

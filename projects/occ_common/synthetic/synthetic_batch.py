@@ -129,8 +129,9 @@ def synthetic_batch(cfg: Config,
         labels (bool): Training targets: ``gt_occ`` with
             :func:`synthetic_labels` instead of all empty, a ``gt_depth``
             map per image (:func:`synthetic_depth`), and where the model
-            asks for them its ``loss_mask_key`` mask and ``gt_seg_2d``
-            (:func:`synthetic_seg_2d`). Defaults to False.
+            asks for them its ``loss_mask_key`` mask, ``gt_seg_2d``
+            (:func:`synthetic_seg_2d`) and point labels
+            (:func:`synthetic_point_labels`). Defaults to False.
         seed (int): Of the random generator (e.g. one batch per DDP rank).
             Defaults to 0.
 
@@ -210,6 +211,10 @@ def synthetic_batch(cfg: Config,
                                              5, gen), 1)
                         for _ in range(1, frames)
                     ]))
+        head = cfg.model.get('point_seg_head')
+        if labels and head and 'points' in inputs:
+            sample.gt_pts_seg = synthetic_point_labels(
+                inputs['points'][index], head['num_classes'], gen)
         if labels and has_imgs:
             sample.gt_depth = synthetic_depth(num_cams, cfg.img_size, gen)
             if cfg.model.get('loss_seg') is not None:
@@ -280,3 +285,24 @@ def synthetic_seg_2d(depth: torch.Tensor, num_classes: int,
     seg = gen.integers(1, num_classes, tuple(depth.shape)).astype(np.uint8)
     seg[depth.numpy() <= 0] = 255
     return torch.from_numpy(seg)
+
+
+def synthetic_point_labels(points: torch.Tensor, num_classes: int,
+                           gen: np.random.Generator):
+    """Point labels as ``LoadLidarSegLabels`` gives them: a uniform random
+    class in 1..``num_classes`` - 1 per key-frame point (time lag 0 in
+    column 4, or every point without one), the ignore label 255 on the
+    sweeps' points.
+
+    Args:
+        points (Tensor): One cloud. Shape (P, C).
+        num_classes (int): Point classes, 0 ("no class") included.
+
+    Returns:
+        PointData: ``pts_semantic_mask``, int64 (P,).
+    """
+    from mmdet3d.structures import PointData
+    labels = gen.integers(1, num_classes, len(points))
+    if points.shape[1] > 4:
+        labels[points[:, 4].numpy() != 0] = 255
+    return PointData(pts_semantic_mask=torch.from_numpy(labels))

@@ -77,7 +77,7 @@ def reference_spvcnn_forward(encoder, points) -> Tensor:
     def mlp(layer, feats):
         return F.relu(layer.norm(layer.linear(feats)))
 
-    batch, position, features = encoder._gather_points(points)
+    batch, position, features, _ = encoder._gather_points(points)
     upper = position.new_tensor(encoder.sparse_shape).long() - 1
     fine = torch.minimum(torch.floor(position).long(), upper)
     keys, rows = torch.unique(

@@ -1,4 +1,5 @@
 """Read what tools/test.py logged, for end-to-end tests of the tools."""
+import contextlib
 import glob
 import json
 import math
@@ -133,3 +134,30 @@ def export_onnx_report(config: str, out: str,
     with contextlib.redirect_stdout(io.StringIO()):
         return load_tool('tools/deployment/export_onnx.py').main(
             [config, 'none', '--out', out, '--verify', *verify])
+
+
+@contextlib.contextmanager
+def quiet_logger():
+    """mmengine's current logger at WARNING within the block: a paper
+    model's ``init_weights`` logs every parameter's initialisation at INFO
+    (1.5 k lines)."""
+    import logging
+
+    from mmengine.logging import MMLogger
+    logger = MMLogger.get_current_instance()
+    level = logger.level
+    logger.setLevel(logging.WARNING)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
+
+
+def occcyl_graph_parity(report: Dict, sample: str) -> Tuple[Dict, Dict]:
+    """The verification of an OccCylindrical export on ``sample``: the
+    prediction graph's (logits against the model's own forward) and the
+    camera graph's (depth and context against its module), from
+    :func:`export_onnx_report`'s report."""
+    graphs = report['graphs']
+    return (graphs['prediction']['verify'][sample],
+            graphs['camera']['verify'][sample])

@@ -3,9 +3,11 @@ import numpy as np
 import pytest
 import torch
 
-from projects.occ_common.geometry.depth import (depth_bin_values,
+from projects.occ_common.geometry.depth import (depth_bin_coordinate,
+                                                depth_bin_values,
                                                 depth_to_bins,
                                                 nearest_depth_map,
+                                                normalize_depth_bound,
                                                 patch_min_depth,
                                                 project_nearest,
                                                 project_points)
@@ -139,6 +141,52 @@ def test_numpy_and_torch_agree_on_a_random_cloud():
         for x, y in zip(a[:3] + a[4:], b[:3] + b[4:]):
             np.testing.assert_array_equal(x, y.numpy())
         np.testing.assert_allclose(a[3], b[3].numpy(), rtol=1e-12)
+
+
+SID = (1.0, 5.0, 1.0, 'sid')  # 4 bins, log-spaced from 1 m to 5 - 1 = 4 m
+
+
+def test_sid_bins_are_bevdets_log_spaced_points():
+    """BEVDet's sid=True: D = (5 - 1) / 1 = 4 bins at 1 * 4 ** (k / 3):
+    1, 1.5874, 2.5198, 4 m; the coordinate of d is 3 log(d) / log(4), so
+    2 m sits at 1.5 (between bins 1 and 2) and every bin point at its
+    index. The uniform bound stays 1, 2, 3, 4."""
+    torch.testing.assert_close(
+        depth_bin_values(SID),
+        torch.tensor([1.0, 4**(1 / 3), 4**(2 / 3), 4.0]))
+    assert depth_bin_values(SID[:3]).tolist() == [1.0, 2.0, 3.0, 4.0]
+    coord = depth_bin_coordinate(torch.tensor([2.0]), SID)
+    torch.testing.assert_close(coord, torch.tensor([1.5]))
+    torch.testing.assert_close(
+        depth_bin_coordinate(depth_bin_values(SID), SID),
+        torch.arange(4.0))
+
+
+def test_sid_targets_floor_the_log_coordinate():
+    """BEVDet's sid targets: floor(3 log(d) / log 4). 0.99 m -> -0.02,
+    dropped; 1.5 m -> 0.88 -> bin 0; 2.0 -> 1.5 -> 1; 3.9 -> 2.94 -> 2;
+    6.0 -> 3.88 -> 3 (the last bin runs to 4 ** (4 / 3) = 6.35 m);
+    6.5 -> 4.05 dropped. With nearest_bin (+0.5 before the floor) 0.99 m
+    -> 0.48 -> 0, 1.5 -> 1, 2.0 -> 2, 3.9 -> 3.44 -> 3, and 6.0 -> 4.38
+    is dropped."""
+    depth = torch.tensor([[[0.99, 1.5, 2.0, 3.9, 6.0, 6.5]]])
+    onehot, valid = depth_to_bins(depth, 1, SID)
+    assert valid.tolist() == [False, True, True, True, True, False]
+    assert onehot.argmax(1)[valid].tolist() == [0, 1, 2, 3]
+    onehot, valid = depth_to_bins(depth, 1, SID, nearest_bin=True)
+    assert valid.tolist() == [True, True, True, True, False, False]
+    assert onehot.argmax(1)[valid].tolist() == [0, 1, 2, 3]
+
+
+def test_depth_bound_spellings():
+    """An explicit 'uniform' compares equal to the three numbers; 'sid'
+    is kept; other spacings and a SID range without room are refused."""
+    assert normalize_depth_bound([1, 5, 1, 'uniform']) == (1.0, 5.0, 1.0)
+    assert normalize_depth_bound(SID) == SID
+    with pytest.raises(ValueError, match='spacing'):
+        normalize_depth_bound((1, 5, 1, 'log'))
+    with pytest.raises(ValueError, match="'sid'"):
+        normalize_depth_bound((0.0, 5, 1, 'sid'))
 
 
 def test_bad_depth_bound_and_patch():

@@ -278,3 +278,29 @@ def test_bad_entries_are_named():
     with pytest.raises(ValueError, match='tolerance'):
         check_entries(dict(a=dict(module='m', tolerance=-1)))
     assert check_entries(None) == {}
+
+
+def test_key_map_renames_the_files_keys(tmp_path):
+    """A file whose ResNet stages are called ``block{N}`` (another
+    codebase's names) loads with ``key_map`` renaming them to mmdet's
+    ``layer{N}``; renaming two keys alike is refused, naming the key; a
+    malformed map and a dropped (None) entry are handled at the check."""
+    model = _resnet()
+    state = _torchvision_file(model, tmp_path / 'plain.pth')
+    renamed = {k.replace('layer', 'block', 1): v for k, v in state.items()}
+    torch.save(renamed, tmp_path / 'other.pth')
+    report = load_pretrained(
+        model, 'img', _entry(checkpoint=str(tmp_path / 'other.pth'),
+                             key_map=[(r'^block(\d)', r'layer\1')],
+                             ignore=[r'^fc\.']))
+    assert report['loaded'] == len(state) - 2
+    loaded = model.state_dict()
+    assert all(torch.equal(loaded[k], v) for k, v in state.items()
+               if not k.startswith('fc.'))
+    with pytest.raises(PretrainedMismatchError, match='two of the file'):
+        load_pretrained(
+            _resnet(), 'img', _entry(checkpoint=str(tmp_path / 'other.pth'),
+                                     key_map=[(r'^block\d', 'layer1')]))
+    with pytest.raises(ValueError, match='key_map must be a list of'):
+        check_entries(dict(a=dict(module='m', key_map=['layer'])))
+    assert check_entries(dict(a=None, b=dict(module='m'))).keys() == {'b'}

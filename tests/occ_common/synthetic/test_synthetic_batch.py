@@ -84,6 +84,16 @@ def test_synthetic_training_batch_has_what_the_losses_read():
     plain, _ = sb.synthetic_batch(cfg, 1, 220)
     assert 'mask_camera' not in plain['data_samples'][0]
     assert 'gt_seg_2d' not in plain['data_samples'][0]
+    # The point segmentation head's labels: a class in 1..16 on the 20
+    # key-frame points (lag 0 of 220 points in 11 sweeps), 255 on the 200
+    # sweep points.
+    points = batch['inputs']['points'][0]
+    labels = sample.gt_pts_seg.pts_semantic_mask
+    assert labels.dtype == torch.long and labels.shape == (220, )
+    key = points[:, 4] == 0
+    assert int(key.sum()) == 20 and (labels[~key] == 255).all()
+    assert labels[key].min() >= 1 and labels[key].max() <= 16
+    assert 'gt_pts_seg' not in plain['data_samples'][0]
 
 
 def test_two_frame_batch_carries_the_previous_key_frame():

@@ -15,7 +15,9 @@ import pytest
 from projects.occ_common.analysis.real_sample import (MISSING_REASON,
                                                       real_info_file)
 from projects.occ_common.deployment import graph_summary
-from projects.occ_common.testing.tool_logs import REPO_ROOT, export_onnx_report
+from projects.occ_common.testing.tool_logs import (REPO_ROOT,
+                                                   export_onnx_report,
+                                                   occcyl_graph_parity)
 from projects.occ_cyl.deployment.graphs import MIDDLE_OUTSIDE
 
 CONFIG = osp.join(REPO_ROOT, 'configs', 'occ_cyl',
@@ -70,9 +72,8 @@ def test_parity_on_another_rig_and_point_count(report):
 def test_parity_on_the_real_sample(report):
     """The real key frame (~24k points, real calibration) through the
     config's test pipeline."""
-    graphs = report['graphs']
-    result = graphs['prediction']['verify'][REAL]
+    result, camera = occcyl_graph_parity(report, REAL)
     assert result['num_points'] > 20000
     assert result['max_abs_diff'] <= 1e-3
     assert result['argmax_agreement'] >= 0.999
-    assert graphs['camera']['verify'][REAL]['max_abs_diff'] <= 1e-3
+    assert camera['max_abs_diff'] <= 1e-3

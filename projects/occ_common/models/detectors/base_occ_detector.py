@@ -26,7 +26,7 @@ from mmdet3d.structures import Det3DDataSample
 from mmdet3d.utils import OptConfigType, OptMultiConfig
 from torch import Tensor, nn
 
-from ...geometry.depth import num_depth_bins
+from ...geometry.depth import normalize_depth_bound, num_depth_bins
 from ...geometry.seg_targets import downsample_seg_labels
 from ...utils.precision import float32_math
 from ..layers.camera_geometry import camera_parameter_vector, lidar2img_matrix
@@ -114,7 +114,7 @@ class BaseOccDetector(Base3DDetector):
         self.depth_bound = None
         if depth_bound is not None:
             num_depth_bins(depth_bound)  # validates
-            self.depth_bound = tuple(float(v) for v in depth_bound)
+            self.depth_bound = normalize_depth_bound(depth_bound)
         self.loss_depth = self.build_child(loss_depth,
                                            depth_bound=self.depth_bound)
         self.loss_seg = self.build_child(loss_seg)

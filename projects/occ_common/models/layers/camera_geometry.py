@@ -27,7 +27,7 @@ from typing import Sequence, Tuple
 import torch
 from torch import Tensor
 
-from ...geometry.depth import depth_bin_values
+from ...geometry.depth import depth_bin_values, normalize_depth_bound
 from ...geometry.inverse import invert_matrix
 from ...utils.precision import float32_math
 from .cylindrical_coords import cartesian_to_cylindrical
@@ -85,7 +85,7 @@ def device_frustum(img_shape: Sequence[int], feat_shape: Sequence[int],
     """
     return _device_frustum(
         tuple(int(v) for v in img_shape), tuple(int(v) for v in feat_shape),
-        tuple(float(v) for v in depth_bound), torch.device(device))
+        normalize_depth_bound(depth_bound), torch.device(device))
 
 
 @float32_math

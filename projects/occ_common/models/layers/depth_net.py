@@ -20,6 +20,7 @@ from mmdet3d.utils import ConfigType, OptMultiConfig
 from mmengine.model import BaseModule
 from torch import Tensor, nn
 
+from ...geometry.depth import normalize_depth_bound
 from ...geometry.depth import num_depth_bins as num_depth_bins_of
 from .checkpointing import checkpoint_if_grad
 
@@ -168,7 +169,7 @@ class DepthNet(BaseModule):
         self.with_cp = with_cp
         self.depth_bound = None
         if depth_bound is not None:
-            self.depth_bound = tuple(float(v) for v in depth_bound)
+            self.depth_bound = normalize_depth_bound(depth_bound)
             derived = num_depth_bins_of(depth_bound)
             if num_depth_bins not in (None, derived):
                 raise ValueError(f'DepthNet: num_depth_bins={num_depth_bins} '

@@ -7,7 +7,8 @@ import torch.nn.functional as F
 from mmdet3d.registry import MODELS
 from torch import Tensor
 
-from ...geometry.depth import depth_to_bins, num_depth_bins
+from ...geometry.depth import (depth_to_bins, normalize_depth_bound,
+                               num_depth_bins)
 from ...utils.device_path import accelerator_path
 
 
@@ -44,7 +45,7 @@ class DepthBCELoss(nn.Module):
         if int(downsample) != downsample or downsample < 1:
             raise ValueError('DepthBCELoss: expected a positive integer '
                              f'downsample, got {downsample!r}.')
-        self.depth_bound = tuple(float(v) for v in depth_bound)
+        self.depth_bound = normalize_depth_bound(depth_bound)
         self.downsample = int(downsample)
         self.loss_weight = loss_weight
         self.nearest_bin = bool(nearest_bin)

@@ -8,6 +8,7 @@ between backends.
 from .backend import (BACKENDS, resolve_backend, spconv_available,
                       spconv_supports_cuda)
 from .dense import scatter_bev, to_dense, to_dense_bev
+from .point_seg_head import PointSegHead
 from .point_voxel import (TrilinearPlan, coord_index, devoxelize,
                           point_to_voxel, point_voxel_offsets, scatter_mean,
                           trilinear_devoxelize, trilinear_plan, voxel_rows)
@@ -23,7 +24,8 @@ from .spvcnn_encoder import SPVCNNEncoder
 from .torch_backend import rulebook_conv
 
 __all__ = [
-    'BACKENDS', 'CoordIndex', 'LinearBNReLU', 'Rulebook', 'SPVCNNEncoder',
+    'BACKENDS', 'CoordIndex', 'LinearBNReLU', 'PointSegHead', 'Rulebook',
+    'SPVCNNEncoder',
     'TrilinearPlan', 'devoxelize', 'trilinear_plan',
     'SparseBatchNorm', 'SparseConv', 'SparseConvBNReLU', 'SparseConvBase',
     'SparseInverseConv', 'SparseReLU', 'SparseResBlock', 'SparseTensor',

@@ -85,6 +85,11 @@ class SPVCNNEncoder(BaseModule):
             Defaults to ``'max'``.
         point_offsets (bool): Add the per-point offsets to the voxel mean
             and centre and the point MLP (step 1). Defaults to False.
+        bev_output (bool): Build the BEV projection (step 4). False builds
+            an encoder of point features only (:meth:`encode_points`), as
+            the lidarseg pre-training of SDG-OCC's release trains it, whose
+            checkpoint then loads into one with the BEV projection (that
+            projection's keys allowed missing). Defaults to True.
         backend (str): Sparse conv backend, ``'auto'``, ``'spconv'`` or
             ``'torch'``. Defaults to ``'auto'``.
         with_cp (bool): In training, keep only each segment's inputs
@@ -111,6 +116,7 @@ class SPVCNNEncoder(BaseModule):
                  out_channels: int = 128,
                  bev_reduce: str = 'max',
                  point_offsets: bool = False,
+                 bev_output: bool = True,
                  backend: str = 'auto',
                  with_cp: bool = False,
                  init_cfg: Optional[Union[dict, List[dict]]] = None) -> None:
@@ -170,14 +176,17 @@ class SPVCNNEncoder(BaseModule):
             self.stages.append(nn.Sequential(*layers))
             self.point_mlps.append(LinearBNReLU(point_channels, stage_out))
             point_channels = stage_out
-        if bev_reduce == 'concat':
+        self.bev_proj = None
+        if bev_output and bev_reduce == 'concat':
             levels = self.sparse_shape[0] // self.total_stride
             self.bev_proj = nn.Sequential(
                 nn.Conv2d(channels * levels, out_channels, 1, bias=False),
                 nn.BatchNorm2d(out_channels), nn.ReLU(inplace=True))
-        else:
+        elif bev_output:
             self.bev_proj = LinearBNReLU(channels, out_channels)
         self.out_channels = out_channels
+        #: Channels of the point features of :meth:`encode_points`.
+        self.point_channels = point_channels
 
     @staticmethod
     def _check_config(in_channels, voxel_size, point_cloud_range,
@@ -253,7 +262,8 @@ class SPVCNNEncoder(BaseModule):
 
         Returns:
             tuple[Tensor]: Batch index (P,), position in voxel units
-            ``(z, y, x)`` (P, 3) and features (P, in_channels).
+            ``(z, y, x)`` (P, 3), features (P, in_channels) and the kept
+            rows of the concatenated input (P,).
         """
         if not isinstance(points, (list, tuple)) or len(points) == 0:
             raise ValueError('SPVCNNEncoder expects a non-empty list or tuple'
@@ -281,7 +291,7 @@ class SPVCNNEncoder(BaseModule):
         keep = ((xyz >= low) & (xyz < high)).all(dim=1).nonzero().squeeze(1)
         cat = cat.index_select(0, keep)
         position = (cat[:, :3] - low) / cat.new_tensor(self.voxel_size)
-        return batch.index_select(0, keep), position.flip(1), cat
+        return batch.index_select(0, keep), position.flip(1), cat, keep
 
     def _bev_cells(self, coords: Tensor, stride: int) -> Tuple[Tensor, Tensor]:
         """BEV (row, column) of the centres of voxels at a given stride."""
@@ -339,11 +349,40 @@ class SPVCNNEncoder(BaseModule):
               Shape (B, out_channels, H, W).
             - bev_mask: True where a cell holds a LiDAR voxel.
               Shape (B, 1, H, W), bool.
+            - point_feats, point_index: As :meth:`encode_points`.
+        """
+        if self.bev_proj is None:
+            raise ValueError('SPVCNNEncoder(bev_output=False) has no BEV '
+                             'projection: call encode_points')
+        out = self.encode_points(points)
+        x = out.pop('voxels')
+        return dict(
+            bev=self._to_bev(x),
+            bev_mask=self._bev_mask(out.pop('coords'), len(points)), **out)
+
+    def encode_points(self, points: Sequence[Tensor]) -> Dict:
+        """Voxel and point features of a batch, without the BEV (steps
+        1-3 of the class doc).
+
+        Args:
+            points (Sequence[Tensor]): As :meth:`forward`'s.
+
+        Returns:
+            dict:
+
+            - point_feats (Tensor): The point branch after the last stage,
+              for the points inside ``point_cloud_range``, grouped by
+              voxel. Shape (P, point_channels).
+            - point_index (Tensor): Row of each of them in
+              ``torch.cat(points)``. Shape (P,), long.
+            - voxels (SparseTensor): The last stage's voxels.
+            - coords (Tensor): The input voxels (batch, z, y, x).
+              Shape (V, 4).
         """
         # Recomputed in segments (the stem, then each stage) so that
         # the backward rebuilds one segment's activations at a time; the
         # per-point features between segments are kept.
-        segment = self._group_points(points)
+        segment, point_index = self._group_points(points)
         batch, position, coords, rows = segment[:4]
         # Made outside the segments: their recomputation reuses the
         # rulebooks of the first run (SparseTensor.rulebook_memo).
@@ -356,8 +395,8 @@ class SPVCNNEncoder(BaseModule):
             x, point_feats = checkpoint_if_grad(
                 self.with_cp, self._stage, index, stride, x, point_feats,
                 batch, position, coords, rows, module=self)
-        return dict(
-            bev=self._to_bev(x), bev_mask=self._bev_mask(coords, len(points)))
+        return dict(point_feats=point_feats, point_index=point_index,
+                    voxels=x, coords=coords)
 
     def _group_points(self, points: Sequence[Tensor]) -> tuple:
         """The points in range, grouped by voxel, and their voxels.
@@ -366,12 +405,13 @@ class SPVCNNEncoder(BaseModule):
             points (Sequence[Tensor]): As :meth:`forward`'s.
 
         Returns:
-            tuple: ``batch`` (P, ), ``position`` in voxels (P, 3),
-            ``coords`` (V, 4) of the occupied voxels, ``rows`` (P, ) each
-            point's voxel, ``features`` (P, C) and ``fine`` (P, 3) each
-            point's voxel index, and the batch size.
+            tuple: The segment: ``batch`` (P, ), ``position`` in voxels
+            (P, 3), ``coords`` (V, 4) of the occupied voxels, ``rows``
+            (P, ) each point's voxel, ``features`` (P, C) and ``fine``
+            (P, 3) each point's voxel index, and the batch size; and each
+            point's row in the concatenated input (P, ).
         """
-        batch, position, features = self._gather_points(points)
+        batch, position, features, kept = self._gather_points(points)
         # float32 rounding can put a point just below the range maximum
         # on the boundary cell index; keep it in the last cell.
         upper = position.new_tensor(self.sparse_shape).long() - 1
@@ -389,7 +429,8 @@ class SPVCNNEncoder(BaseModule):
         batch, position, features, fine, rows = (
             t[order] for t in (batch, position, features, fine, rows))
         coords = delinearize(keys, self.sparse_shape)
-        return batch, position, coords, rows, features, fine, len(points)
+        return ((batch, position, coords, rows, features, fine, len(points)),
+                kept[order])
 
     def _stem(self, batch: Tensor, position: Tensor, coords: Tensor,
               rows: Tensor, features: Tensor, fine: Tensor,
