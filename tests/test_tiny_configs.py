@@ -25,8 +25,11 @@ from projects.occ_common.testing.tool_logs import (REPO_ROOT,
                                                    mean_of_class_ious,
                                                    run_tool, train_losses)
 
+#: The four-camera rig's configs train on their own world
+#: (tests/test_quad_rig.py).
 TINY = sorted(
-    glob.glob(osp.join(REPO_ROOT, 'configs', '*', '*_tiny_*.py')))
+    p for p in glob.glob(osp.join(REPO_ROOT, 'configs', '*', '*_tiny_*.py'))
+    if '-quad-' not in p)
 #: Trained end to end: one config per project.
 TRAINED = [p for p in TINY if osp.basename(p).startswith(('occcyl_tiny',
                                                           'sdgocc-kl_tiny'))]

@@ -66,6 +66,12 @@ def parse_args(argv=None):
         default=4,
         help='processes that convert samples (0: this one)')
     parser.add_argument(
+        '--num-pts-feats',
+        type=int,
+        help='float32 values per point of the LiDAR files (default: a '
+        'synthetic world\'s own, else nuScenes\' 5: x, y, z, intensity, '
+        'ring); e.g. 4 for x, y, z, intensity')
+    parser.add_argument(
         '--from-mmdet3d-info',
         nargs='+',
         metavar='INFO_FILE',
@@ -107,6 +113,7 @@ def main(argv=None):
                     val_scenes=args.val_scenes,
                     overwrite=args.overwrite,
                     workers=args.workers,
+                    num_pts_feats=args.num_pts_feats,
                     **labels))
     for split, path in written.items():
         print(f'{split}: {path}')

@@ -35,6 +35,7 @@ SMALL_OCC3D = osp.join(
     CONFIG_DIR, 'occcyl_small_1xb1-12e_occ3d-nus-nomask-synthetic.py')
 SEG2D = osp.join(CONFIG_DIR,
                  'occcyl-seg2d_small_1xb1-12e_surroundocc-nus-synthetic.py')
+QUAD = SMALL.replace('surroundocc-nus', 'surroundocc-quad')
 
 #: What each config changes in the model of the config it builds on.
 COUPLED = {'point_cloud_range', 'voxel_size', 'num_classes', 'empty_index'}
@@ -83,6 +84,8 @@ DELTAS = {
         'depth_net.seg_channels', 'loss_seg.type', 'loss_seg.ignore_index',
         'loss_seg.avg_non_ignore', 'loss_seg.loss_weight'
     }),
+    # The four-camera rig without LiDAR ring index: data only.
+    QUAD: (SMALL, set()),
     # The dataset base's geometric augmentation: the pipeline only.
     'occcyl-geoaug': (PAPER, set()),
     # Table V (3), VI (2) and VII (3): one knob each.
@@ -105,19 +108,21 @@ def test_config_inventory():
     """The paper's config, its Occ3D variant (also without the camera
     mask, for RayIoU), the lighter model, the tiny
     and small synthetic configs (the small one also with a 2-D semantic
-    target, and on Occ3D without the mask), the deltas of Tables V (3
-    files), VI (2) and VII (3) and the geometric-augmentation option."""
+    target, on Occ3D without the mask, and on the four-camera rig), the
+    deltas of Tables V (3 files), VI (2) and VII (3) and the
+    geometric-augmentation option."""
     assert set(MAIN) == {
-        PAPER, OCC3D, NOMASK, LITE, TINY, SMALL, SMALL_OCC3D, SEG2D
+        PAPER, OCC3D, NOMASK, LITE, TINY, SMALL, SMALL_OCC3D, SEG2D, QUAD
     }
     assert ({_name(p) for p in ABLATIONS}
-            | {PAPER, OCC3D, NOMASK, LITE, SMALL, SMALL_OCC3D, SEG2D}
+            | {PAPER, OCC3D, NOMASK, LITE, SMALL, SMALL_OCC3D, SEG2D, QUAD}
             == set(DELTAS))
 
 
 @pytest.mark.parametrize(
     'path',
-    [PAPER, OCC3D, NOMASK, LITE, SMALL, SMALL_OCC3D, SEG2D] + ABLATIONS,
+    [PAPER, OCC3D, NOMASK, LITE, SMALL, SMALL_OCC3D, SEG2D, QUAD] +
+    ABLATIONS,
     ids=lambda p: osp.basename(p)[:-3])
 def test_each_delta_changes_only_its_documented_keys(path):
     """Compared with the config it builds on, a config changes exactly the

@@ -84,6 +84,8 @@ DELTAS = {
         _small('fusion'), {'loss_mask_key'}),
     _small('kl').replace('occ3d-nus', 'occ3d-nus-nomask'): (
         _small('kl'), {'loss_mask_key'}),
+    # The four-camera rig without LiDAR ring index: data only.
+    TINY_FUSION.replace('occ3d-nus', 'occ3d-quad'): (TINY_FUSION, set()),
     # The temporal variants (T = 2): the frame count, nothing else.
     FUSION_2F: (FUSION, {'num_frames'}),
     _tiny('fusion-2f'): (TINY_FUSION, {'num_frames'}),

@@ -4,13 +4,16 @@ and Occ3D occupancy labels) for demos and tests.
     python tools/dataset_converters/create_synthetic_nuscenes.py \\
         data/nuscenes_synthetic \\
         --scenes 2 --samples 4 --sweeps 10 --image-size 480 270 --seed 0
+    # four cameras and a LiDAR without ring index (docs/customize_dataset.md)
+    python tools/dataset_converters/create_synthetic_nuscenes.py \
+        data/nuscenes_synthetic_quad --camera-rig quad --no-lidar-ring
 
 See ``projects/occ_common/synthetic/generate.py`` for the layout.
 """
 import argparse
 import json
 
-from projects.occ_common.synthetic import (CONDITIONS,
+from projects.occ_common.synthetic import (CAMERA_RIGS, CONDITIONS,
                                            generate_synthetic_nuscenes)
 
 
@@ -37,6 +40,12 @@ def parse_args(argv=None):
     parser.add_argument('--conditions', nargs='+', choices=sorted(CONDITIONS),
                         help='one weather / time of day per scene (default: '
                         'clear, night_rain, rain, night, ...)')
+    parser.add_argument('--camera-rig', choices=sorted(CAMERA_RIGS),
+                        default='nuscenes', help='nuscenes: the six nuScenes '
+                        'cameras (default); quad: four wide cameras')
+    parser.add_argument('--no-lidar-ring', dest='lidar_ring',
+                        action='store_false', help='write x, y, z, '
+                        'intensity per LiDAR point (no ring index)')
     parser.add_argument('--overwrite', action='store_true',
                         help='replace an earlier synthetic world in OUT_DIR')
     return parser.parse_args(argv)
@@ -51,6 +60,7 @@ def main(argv=None):
         image_size=tuple(args.image_size), version=args.version,
         seed=args.seed, overwrite=args.overwrite,
         azimuth_bins=args.azimuth_bins, conditions=args.conditions,
+        camera_rig=args.camera_rig, lidar_ring=args.lidar_ring,
         progress=True)
     brief = {k: v for k, v in summary.items()
              if k not in ('paths', 'sample_tokens')}

@@ -19,10 +19,9 @@ backend_args = None
 # margin (projects/occ_common/transforms/ego_points.py): its own returns (a
 # quarter of a key frame, in voxels labelled empty) go from every sweep.
 ego_box = [-0.9, -1.1, -0.5, 3.7, 1.1, 2.2]
-# Points carry x, y, z, intensity, time lag (the files' ring index becomes
-# the time lag when the sweeps are merged).
+# x, y, z, intensity of the info file's point layout, then the time lag.
 _key_frame = dict(type='LoadOccPointsFromFile', coord_type='LIDAR',
-                  load_dim=5, use_dim=5, backend_args=backend_args)
+                  load_dim=None, use_dim=4, backend_args=backend_args)
 _remove_ego = dict(type='RemoveEgoPoints', ego_box=ego_box)
 # nuScenes-lidarseg point labels, for SDG-OCC's 2-D semantic targets only
 # (PointsToSemanticMaps): loaded where the info file has them, else those
@@ -31,10 +30,9 @@ _lidarseg = dict(
     type='LoadLidarSegLabels', optional=True, backend_args=backend_args)
 # The box, not mmdet3d's remove_close (a 1 m sphere that misses the bonnet).
 _sweeps = dict(
-    type='LoadOccPointsFromMultiSweeps', sweeps_num=sweeps_num, load_dim=5,
-    use_dim=[0, 1, 2, 3, 4], ego_box=ego_box, backend_args=backend_args)
-_images = dict(type='LoadMultiViewImagesOcc', cam_names=cam_names,
-               backend_args=backend_args)
+    type='LoadOccPointsFromMultiSweeps', sweeps_num=sweeps_num,
+    load_dim=None, ego_box=ego_box, backend_args=backend_args)
+_images = dict(type='LoadMultiViewImagesOcc', backend_args=backend_args)
 # Up to the occupancy labels: points, sweeps, images and (training) BEVDet's
 # image augmentation, +-6 % scale, random horizontal crop, flips and
 # +-5.4 deg rotation.
@@ -101,3 +99,6 @@ ray_iou_metric = dict(
 _synthetic_root = 'data/nuscenes_synthetic/'
 _synthetic_loader = dict(
     num_workers=0, persistent_workers=False, pin_memory=False)
+# Its four-camera rig (create_synthetic_nuscenes.py --camera-rig quad ...)
+_quad = dict(data_root='data/nuscenes_synthetic_quad/',
+             cam_names=['CAM_FRONT', 'CAM_LEFT', 'CAM_BACK', 'CAM_RIGHT'])

@@ -3,7 +3,7 @@ import copy
 from typing import Optional
 
 from ..transforms.corruptions import CONDITIONS, with_corruption
-from ..transforms.corruptions.pipeline import INPUT_LOADERS, SWEEPS_LOADER
+from ..transforms.corruptions.pipeline import INPUT_LOADERS, keep_rings
 from .unlabelled_pipeline import innermost_dataset
 
 
@@ -94,9 +94,9 @@ def loaded_inputs(cfg, data_root: str, ann_file: Optional[str] = None,
     init_default_scope(cfg.get('default_scope', 'mmdet3d'))
     ds_cfg = copy.deepcopy(innermost_dataset(cfg.test_dataloader.dataset))
     ds_cfg['pipeline'] = [
-        dict(t, record_ring=True) if t['type'] == SWEEPS_LOADER else dict(t)
-        for t in ds_cfg['pipeline'] if t['type'] in INPUT_LOADERS
+        dict(t) for t in ds_cfg['pipeline'] if t['type'] in INPUT_LOADERS
     ]
+    keep_rings(ds_cfg['pipeline'])
     ds_cfg.update(data_root=data_root, num_frames=2, test_mode=True)
     if ann_file is not None:
         ds_cfg['ann_file'] = ann_file

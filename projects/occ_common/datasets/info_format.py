@@ -24,8 +24,25 @@ CAMERA_NAMES = ('CAM_FRONT', 'CAM_FRONT_RIGHT', 'CAM_FRONT_LEFT', 'CAM_BACK',
                 'CAM_BACK_LEFT', 'CAM_BACK_RIGHT')
 
 #: Values per LiDAR point in nuScenes ``.pcd.bin`` files:
-#: x, y, z, intensity, ring index (float32 each).
+#: x, y, z, intensity, ring index (float32 each). Other LiDARs record
+#: theirs in the info file's ``lidar_points.num_pts_feats``.
 NUM_POINT_FEATS = 5
+
+
+def camera_order(names: Sequence[str]) -> Tuple[str, ...]:
+    """The order in which an info file lists a rig's cameras.
+
+    Args:
+        names (Sequence[str]): The rig's camera channels, each once.
+
+    Returns:
+        tuple[str, ...]: nuScenes' six cameras in mmdet3d's order
+        (:data:`CAMERA_NAMES`) when ``names`` are those six, any other
+        rig's cameras in the given order.
+    """
+    names = tuple(dict.fromkeys(names))
+    return CAMERA_NAMES if set(names) == set(CAMERA_NAMES) else names
+
 
 #: Keys every ``data_list`` entry carries (checked on load).
 REQUIRED_SAMPLE_KEYS = ('sample_idx', 'token', 'timestamp', 'scene_token',

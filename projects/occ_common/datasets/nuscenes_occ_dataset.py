@@ -53,8 +53,10 @@ class NuScenesOccDataset(BaseDataset):
         data_prefix (dict): Folders (relative to ``data_root``) the info
             paths are joined to: ``pts``, ``sweeps``, ``img``,
             ``pts_semantic_mask``, ``occ``. Defaults to all ``''``.
-        cam_names (Sequence[str]): Cameras kept per sample. Defaults to the
-            six nuScenes cameras in mmdet3d's order.
+        cam_names (Sequence[str], optional): Cameras kept per sample, in
+            order. None keeps the cameras the info file lists (its
+            ``metainfo['cameras']``, e.g. a four-camera rig's). Defaults to
+            the six nuScenes cameras in mmdet3d's order.
         filter_empty_gt (bool): Outside ``test_mode``, drop samples without
             a label of ``occ_format``. Defaults to True.
         load_interval (int): Keep every ``load_interval``-th sample.
@@ -80,7 +82,7 @@ class NuScenesOccDataset(BaseDataset):
                  occ_format: str = 'surroundocc',
                  coord_frame: Optional[str] = None,
                  data_prefix: Optional[dict] = None,
-                 cam_names: Sequence[str] = CAMERA_NAMES,
+                 cam_names: Optional[Sequence[str]] = CAMERA_NAMES,
                  filter_empty_gt: bool = True,
                  load_interval: int = 1,
                  test_mode: bool = False,
@@ -113,7 +115,7 @@ class NuScenesOccDataset(BaseDataset):
         self.num_frames = int(num_frames)
         self.occ_format = occ_format
         self.coord_frame = coord_frame
-        self.cam_names = tuple(cam_names)
+        self.cam_names = None if cam_names is None else tuple(cam_names)
         self.filter_empty_gt = filter_empty_gt
         self.load_interval = load_interval
         self.backend_args = backend_args
@@ -173,6 +175,9 @@ class NuScenesOccDataset(BaseDataset):
                 f'{infos["metainfo"].get("scenes")}); check the split and '
                 '--version given to tools/create_data.py.')
         self._metainfo.update(self._frame_meta)
+        if self.cam_names is None:
+            self.cam_names = self._info_cameras(infos)
+            self._metainfo['cam_names'] = self.cam_names
         for key, value in infos['metainfo'].items():
             self._metainfo.setdefault(key, value)
         self._metainfo['info_classes'] = infos['metainfo'].get('classes')
@@ -184,6 +189,16 @@ class NuScenesOccDataset(BaseDataset):
             for info in parsed:
                 info['prev_frames'] = self.previous_frames(info, by_token)
         return parsed
+
+    def _info_cameras(self, infos: dict) -> tuple:
+        """The cameras an info file lists (``cam_names=None``)."""
+        cameras = infos['metainfo'].get('cameras')
+        if cameras is None:  # written before the converter recorded them
+            cameras = list(infos['data_list'][0]['images'])
+        if not cameras:
+            raise ValueError(f'{self.ann_file}: its samples list no camera;'
+                             ' cam_names=None needs at least one')
+        return tuple(cameras)
 
     def previous_frames(self, info: dict,
                         by_token: Dict[str, dict]) -> List[dict]:

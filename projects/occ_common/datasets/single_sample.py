@@ -145,6 +145,7 @@ def _convert_mmdet3d_sample(infos: dict, index: int, info_file: str,
             warnings.warn(f'{info_file}: {line}')
     os.makedirs(osp.dirname(target), exist_ok=True)
     write_info_file(target, [info], version, 'demo', synthetic=False,
+                    cameras=tuple(info['images']),
                     extended_from=osp.basename(info_file),
                     mmdet3d_info_version=meta.get('info_version'))
     return target

@@ -1,10 +1,14 @@
-"""The 6-camera rig and the ray-cast renderer.
+"""The camera rigs and the ray-cast renderer.
 
-The rig copies nuScenes' mounting: six cameras around the roof at yaws 0,
--55, 55, 180, 110 and -110 degrees (CAM_FRONT, CAM_FRONT_RIGHT,
+The default rig copies nuScenes' mounting: six cameras around the roof at
+yaws 0, -55, 55, 180, 110 and -110 degrees (CAM_FRONT, CAM_FRONT_RIGHT,
 CAM_FRONT_LEFT, CAM_BACK, CAM_BACK_LEFT, CAM_BACK_RIGHT), with nuScenes'
 1600x900 intrinsics (focal length ~1266 px, ~809 px for the wider CAM_BACK)
-scaled to the requested image size. Camera frames follow OpenCV / nuScenes:
+scaled to the requested image size. The ``'quad'`` rig stands for a robot
+or a car with four wide cameras (CAM_FRONT, CAM_LEFT, CAM_BACK, CAM_RIGHT
+at yaws 0, 90, 180 and -90 degrees, 100 degrees of horizontal field of view
+each, so that neighbours overlap by 10 degrees), to exercise rigs other
+than nuScenes'. Camera frames follow OpenCV / nuScenes:
 x right, y down, z forward. Pixel ``(u, v)`` covers ``[u, u + 1) x [v, v +
 1)`` in image coordinates and its ray passes through its centre ``(u + 0.5,
 v + 0.5)``, so a point lands on pixel ``floor(K @ p / z)``; this is the
@@ -29,6 +33,9 @@ from .world import World
 CAMERA_NAMES: Tuple[str, ...] = ('CAM_FRONT', 'CAM_FRONT_RIGHT',
                                  'CAM_FRONT_LEFT', 'CAM_BACK',
                                  'CAM_BACK_LEFT', 'CAM_BACK_RIGHT')
+#: The four cameras of the ``'quad'`` rig, in the order they are written.
+QUAD_CAMERA_NAMES: Tuple[str, ...] = ('CAM_FRONT', 'CAM_LEFT', 'CAM_BACK',
+                                      'CAM_RIGHT')
 
 # name: (translation in the ego frame, yaw deg, fx, cx, cy at 1600x900),
 # close to nuScenes' calibration of vehicle n015.
@@ -41,6 +48,21 @@ _MOUNTS: Dict[str, tuple] = {
     'CAM_BACK_LEFT': ((1.036, 0.484, 1.591), 110.0, 1256.7, 817.8, 452.0),
     'CAM_BACK_RIGHT': ((1.015, -0.480, 1.562), -110.0, 1259.5, 807.3,
                        501.2),
+}
+# The 'quad' rig: 100 degrees horizontal field of view at 1600x900 (fx =
+# 800 / tan(50 deg)), square pixels, the principal point at the centre; the
+# cameras sit at the roof's edges of a 1.6 m wide car.
+_QUAD_FOCAL = 800.0 / np.tan(np.deg2rad(50.0))
+_QUAD_MOUNTS: Dict[str, tuple] = {
+    'CAM_FRONT': ((1.60, 0.00, 1.55), 0.0, _QUAD_FOCAL, 800.0, 450.0),
+    'CAM_LEFT': ((0.90, 0.80, 1.60), 90.0, _QUAD_FOCAL, 800.0, 450.0),
+    'CAM_BACK': ((-0.20, 0.00, 1.60), 180.0, _QUAD_FOCAL, 800.0, 450.0),
+    'CAM_RIGHT': ((0.90, -0.80, 1.60), -90.0, _QUAD_FOCAL, 800.0, 450.0),
+}
+#: Camera rigs by name: their cameras in order and their mounts.
+CAMERA_RIGS: Dict[str, Tuple[Tuple[str, ...], Dict[str, tuple]]] = {
+    'nuscenes': (CAMERA_NAMES, _MOUNTS),
+    'quad': (QUAD_CAMERA_NAMES, _QUAD_MOUNTS),
 }
 #: Optical axis -> ego axes for a camera looking along ego +x:
 #: camera x (right) = ego -y, camera y (down) = ego -z, camera z = ego +x.
@@ -97,23 +119,33 @@ class Camera:
 
 
 def make_camera_rig(image_size: Tuple[int, int],
-                    rng: Optional[np.random.Generator] = None
-                    ) -> List[Camera]:
-    """The six nuScenes-like cameras for an image size.
+                    rng: Optional[np.random.Generator] = None,
+                    rig: str = 'nuscenes') -> List[Camera]:
+    """The cameras of a rig for an image size.
 
     Args:
         image_size (Tuple[int, int]): ``(width, height)`` in pixels.
         rng (np.random.Generator, optional): Adds a per-rig calibration
             jitter (+-1 cm, +-0.3 deg), as real rigs differ between logs.
             Defaults to None (no jitter).
+        rig (str): A key of :data:`CAMERA_RIGS`: ``'nuscenes'`` (six
+            cameras) or ``'quad'`` (four). Defaults to 'nuscenes'.
 
     Returns:
-        List[Camera]: Cameras in :data:`CAMERA_NAMES` order.
+        List[Camera]: Cameras in the rig's order (:data:`CAMERA_NAMES` for
+        nuScenes', :data:`QUAD_CAMERA_NAMES` for the quad rig).
+
+    Raises:
+        ValueError: If ``rig`` is not a known rig.
     """
+    if rig not in CAMERA_RIGS:
+        raise ValueError(f'Expected rig to be one of {sorted(CAMERA_RIGS)}, '
+                         f'got {rig!r}.')
+    names, mounts = CAMERA_RIGS[rig]
     width, height = image_size
     cameras = []
-    for index, name in enumerate(CAMERA_NAMES):
-        translation, yaw, focal, cx, cy = _MOUNTS[name]
+    for index, name in enumerate(names):
+        translation, yaw, focal, cx, cy = mounts[name]
         # A small fixed tilt, as real mounts have, makes every camera's
         # rotation a full 3D one.
         pitch = np.deg2rad(0.4 * ((index % 3) - 1))

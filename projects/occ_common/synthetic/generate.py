@@ -38,7 +38,7 @@ import cv2
 import numpy as np
 
 from ..fileio.safe_names import safe_file_name
-from .camera import CAMERA_NAMES, make_camera_rig
+from .camera import CAMERA_RIGS, make_camera_rig
 from .layout import build_world
 from .lidar import make_lidar2ego
 from .scene_writer import SceneWriter
@@ -89,7 +89,8 @@ def load_world(out_dir: str, scene_name: str) -> World:
 
 
 def _check_args(num_scenes, samples_per_scene, sweeps_per_sample,
-                image_size, version, seed, azimuth_bins, conditions):
+                image_size, version, seed, azimuth_bins, conditions,
+                camera_rig, lidar_ring):
     for name, value, low in (('num_scenes', num_scenes, 1),
                              ('samples_per_scene', samples_per_scene, 1),
                              ('sweeps_per_sample', sweeps_per_sample, 1),
@@ -107,6 +108,12 @@ def _check_args(num_scenes, samples_per_scene, sweeps_per_sample,
             or osp.basename(version) != version):
         raise ValueError('Expected version to be a folder name like '
                          f"'v1.0-mini', got {version!r}.")
+    if camera_rig not in CAMERA_RIGS:
+        raise ValueError(f'Expected camera_rig to be one of '
+                         f'{sorted(CAMERA_RIGS)}, got {camera_rig!r}.')
+    if not isinstance(lidar_ring, (bool, np.bool_)):
+        raise ValueError(f'Expected lidar_ring to be a bool, got '
+                         f'{lidar_ring!r}.')
     if conditions is not None:
         if (isinstance(conditions, str) or len(conditions) != num_scenes
                 or any(c not in CONDITIONS for c in conditions)):
@@ -175,6 +182,8 @@ def generate_synthetic_nuscenes(out_dir: str,
                                 camera_mask_rays: Optional[Tuple[int,
                                                                  int]] = None,
                                 write_camera_labels: bool = True,
+                                camera_rig: str = 'nuscenes',
+                                lidar_ring: bool = True,
                                 progress: bool = False) -> dict:
     """Writes a small, geometrically consistent nuScenes-format world.
 
@@ -202,6 +211,12 @@ def generate_synthetic_nuscenes(out_dir: str,
             size, clipped to 64x36 .. 400x225).
         write_camera_labels (bool): Write the per-pixel class maps to
             ``synthetic_gt/cam_labels``. Defaults to True.
+        camera_rig (str): ``'nuscenes'`` (the six nuScenes cameras) or
+            ``'quad'`` (four wide cameras, see :mod:`.camera`).
+            Defaults to 'nuscenes'.
+        lidar_ring (bool): Store each LiDAR point's ring index as its
+            fifth value, as nuScenes does; False writes ``x, y, z,
+            intensity`` (4 values a point). Defaults to True.
         progress (bool): Show a progress bar of the sweeps on stderr
             (stdout stays for the summary). Defaults to False.
 
@@ -219,7 +234,8 @@ def generate_synthetic_nuscenes(out_dir: str,
     """
     start = time.time()
     _check_args(num_scenes, samples_per_scene, sweeps_per_sample,
-                image_size, version, seed, azimuth_bins, conditions)
+                image_size, version, seed, azimuth_bins, conditions,
+                camera_rig, lidar_ring)
     image_size = (int(image_size[0]), int(image_size[1]))
     if conditions is None:
         conditions = [DEFAULT_CONDITIONS[i % len(DEFAULT_CONDITIONS)]
@@ -241,14 +257,15 @@ def generate_synthetic_nuscenes(out_dir: str,
                       seed=seed, azimuth_bins=azimuth_bins,
                       conditions=list(conditions),
                       camera_mask_rays=list(camera_mask_rays),
-                      write_camera_labels=write_camera_labels)
+                      write_camera_labels=write_camera_labels,
+                      camera_rig=camera_rig, lidar_ring=bool(lidar_ring))
     # Written first, so that an interrupted run is still recognised (and
     # replaced with overwrite=True) as a synthetic world; 'complete' marks
     # a finished one.
     _write_meta(out_dir, dict(format_version=FORMAT_VERSION,
                               complete=False, parameters=parameters))
     tables = NuScenesTables(seed)
-    channels = CAMERA_NAMES + ('LIDAR_TOP', )
+    channels = CAMERA_RIGS[camera_rig][0] + ('LIDAR_TOP', )
     for channel in channels:
         tables.add_sensor(make_token(seed, 'sensor', channel), channel,
                           'lidar' if channel == 'LIDAR_TOP' else 'camera')
@@ -270,7 +287,7 @@ def generate_synthetic_nuscenes(out_dir: str,
         world_rng = np.random.default_rng([seed, index, 0])
         duration = (num_sweeps - 1) * SWEEP_PERIOD_S
         world = build_world(world_rng, duration, is_rainy, is_night)
-        cameras = make_camera_rig(image_size, world_rng)
+        cameras = make_camera_rig(image_size, world_rng, camera_rig)
         lidar2ego = make_lidar2ego(world_rng)
         name = f'scene-{index + 1:04d}'
         base_us = 1532402927000000 + index * 600_000_000 + seed * 1000
@@ -292,7 +309,8 @@ def generate_synthetic_nuscenes(out_dir: str,
             lidar2ego=lidar2ego, tables=tables, logfile=logfile,
             base_us=base_us, azimuth_bins=azimuth_bins,
             camera_mask_rays=camera_mask_rays,
-            write_camera_labels=write_camera_labels)
+            write_camera_labels=write_camera_labels,
+            lidar_ring=bool(lidar_ring))
         recent = deque(maxlen=sweeps_per_sample)
         for sweep_index in range(num_sweeps):
             offset = sweep_index - PRE_SWEEPS

@@ -6,7 +6,8 @@ second. The sensor is mounted like nuScenes' LIDAR_TOP: 1.84 m above the
 ground, rotated -90 degrees about z, so LiDAR x points to the ego's right
 and y forward. A point is stored as ``x, y, z, intensity, ring`` in the
 LiDAR frame of its own sweep (float32), exactly like nuScenes'
-``.pcd.bin`` files.
+``.pcd.bin`` files; a LiDAR without ring index (``with_ring=False``, as
+many drivers export) stores ``x, y, z, intensity``.
 
 A sweep is captured at one instant (no rolling shutter): the whole sweep
 uses the ego pose of its timestamp, which keeps ego-motion compensation
@@ -53,8 +54,9 @@ class Sweep:
     """One LiDAR sweep.
 
     Args:
-        points (np.ndarray): ``x, y, z, intensity, ring`` in the sweep's
-            LiDAR frame, float32. Shape (N, 5).
+        points (np.ndarray): ``x, y, z, intensity, ring`` (without ring
+            index: ``x, y, z, intensity``) in the sweep's LiDAR frame,
+            float32. Shape (N, 5) or (N, 4).
         raw_class (np.ndarray): Raw lidarseg class per point (0 for
             spurious returns), uint8. Shape (N,).
         target (np.ndarray): Box index per point, or
@@ -114,7 +116,7 @@ def beam_directions(azimuth_bins: int, phase: float = 0.0) -> np.ndarray:
 def scan_lidar(world: World, lidar2world: np.ndarray, t: float,
                azimuth_bins: int, rng: np.random.Generator,
                max_range: float = 70.0, min_range: float = 1.0,
-               range_noise: float = 0.01) -> Sweep:
+               range_noise: float = 0.01, with_ring: bool = True) -> Sweep:
     """Captures one sweep of a world.
 
     Args:
@@ -128,6 +130,8 @@ def scan_lidar(world: World, lidar2world: np.ndarray, t: float,
         min_range (float): Nearest return, metres. Defaults to 1.
         range_noise (float): Range noise standard deviation, metres.
             Defaults to 0.01.
+        with_ring (bool): Store each point's ring (beam) index as a fifth
+            value, as nuScenes does. Defaults to True.
 
     Returns:
         Sweep: The sweep.
@@ -171,10 +175,10 @@ def scan_lidar(world: World, lidar2world: np.ndarray, t: float,
     intensity *= 1.0 + 0.1 * rng.standard_normal(len(intensity))
     intensity = np.clip(np.round(intensity), 0, 255)
     ring = np.repeat(np.arange(len(LIDAR_ELEVATIONS_DEG)), azimuth_bins)
-    points = np.concatenate([
-        local_dirs[returned] * measured[:, None], intensity[:, None],
-        ring[returned, None]
-    ], axis=1).astype(np.float32)
+    columns = [local_dirs[returned] * measured[:, None], intensity[:, None]]
+    if with_ring:
+        columns.append(ring[returned, None])
+    points = np.concatenate(columns, axis=1).astype(np.float32)
     # Rays end at the measured range, so a point's voxel is always one its
     # ray reached.
     ray_length = np.full(len(dirs), max_range)

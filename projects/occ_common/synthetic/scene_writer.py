@@ -3,8 +3,8 @@
 :class:`SceneWriter` is driven sweep by sweep by
 :func:`.generate.generate_synthetic_nuscenes`: every LiDAR sweep becomes a
 ``.pcd.bin`` file with its ``sample_data`` and ``ego_pose`` records; every
-key frame additionally gets a ``sample``, lidarseg labels, the six camera
-images, ``sample_annotation`` records and both occupancy ground truths.
+key frame additionally gets a ``sample``, lidarseg labels, the rig's
+camera images, ``sample_annotation`` records and both occupancy ground truths.
 """
 import os
 import os.path as osp
@@ -62,6 +62,8 @@ class SceneWriter:
         camera_mask_rays (tuple): ``(width, height)`` of the ray grid per
             camera for ``mask_camera``.
         write_camera_labels (bool): Write per-pixel class maps.
+        lidar_ring (bool): Store the ring index as a fifth value per
+            LiDAR point. Defaults to True.
     """
 
     def __init__(self, out_dir: str, version: str, seed: int,
@@ -69,13 +71,14 @@ class SceneWriter:
                  cameras: List[Camera], lidar2ego: np.ndarray,
                  tables: NuScenesTables, logfile: str, base_us: int,
                  azimuth_bins: int, camera_mask_rays: tuple,
-                 write_camera_labels: bool):
+                 write_camera_labels: bool, lidar_ring: bool = True):
         self.out_dir, self.version, self.seed = out_dir, version, seed
         self.index, self.name, self.world = scene_index, scene_name, world
         self.cameras, self.lidar2ego = cameras, lidar2ego
         self.tables, self.logfile, self.base_us = tables, logfile, base_us
         self.azimuth_bins = azimuth_bins
         self.write_camera_labels = write_camera_labels
+        self.lidar_ring = lidar_ring
         self.mask_cameras = [cam.scaled(*camera_mask_rays) for cam in cameras]
         self.rng = np.random.default_rng([seed, scene_index, 1])
         self.scene_token = make_token(seed, 'scene', scene_index)
@@ -150,7 +153,8 @@ class SceneWriter:
         """
         ego_pose = self.world.ego_pose(t)
         sweep = scan_lidar(self.world, ego_pose @ self.lidar2ego, t,
-                           self.azimuth_bins, self.rng)
+                           self.azimuth_bins, self.rng,
+                           with_ring=self.lidar_ring)
         folder = 'samples' if key else 'sweeps'
         filename = (f'{folder}/LIDAR_TOP/{self.logfile}__LIDAR_TOP__'
                     f'{self._timestamp(t)}.pcd.bin')

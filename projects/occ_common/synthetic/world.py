@@ -1,6 +1,6 @@
 """The 3D world of one synthetic scene: ground layout, objects, ego motion.
 
-Every sensor of a scene (6 cameras, the LiDAR) and both occupancy ground
+Every sensor of a scene (the cameras, the LiDAR) and both occupancy ground
 truths are computed from the same :class:`World`, so they agree by
 construction. The world is a straight street in a "road frame" ``(u, v)``
 (``u`` along the street, ``v`` to its left) placed in the global frame by an

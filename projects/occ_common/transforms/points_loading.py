@@ -53,6 +53,25 @@ def _check_ring_column(points: np.ndarray, path: str, what: str) -> None:
             'fifth value is something else.')
 
 
+def with_time_lag(points: np.ndarray, lag: float) -> np.ndarray:
+    """Points with the time lag as column 4: written over a fifth value
+    (nuScenes' ring index), appended to x, y, z, intensity.
+
+    Args:
+        points (np.ndarray): Shape (P, C), C >= 4; changed in place when
+            C >= 5.
+        lag (float): Seconds before the key frame.
+
+    Returns:
+        np.ndarray: Shape (P, max(C, 5)), float32.
+    """
+    if points.shape[1] == 4:
+        return np.concatenate(
+            [points, np.full((len(points), 1), lag, points.dtype)], axis=1)
+    points[:, 4] = lag
+    return points
+
+
 def _seconds(value, where: str) -> float:
     """A timestamp in seconds, refusing strings and other non-numbers."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(
@@ -144,15 +163,21 @@ class LoadOccPointsFromFile(LoadPointsFromFile):
     the file. nuScenes files hold x, y, z, intensity, ring (``load_dim=5``):
     a file whose ring column is not beam indices (another dtype or point
     width) is refused, as is a ``load_dim`` other than the sample's
-    ``num_pts_feats``. Points with NaN / inf values are dropped (one
-    warning per file), and ``points_kept_rows`` tells
-    ``LoadLidarSegLabels`` which rows of the file are left. An empty file
-    is a valid sample with zero points.
+    ``num_pts_feats``. ``load_dim=None`` takes each sample's
+    ``num_pts_feats`` instead, so that one pipeline reads nuScenes' files
+    and those of a LiDAR without ring index (x, y, z, intensity). Points
+    with NaN / inf values are dropped (one warning per file), and
+    ``points_kept_rows`` tells ``LoadLidarSegLabels`` which rows of the
+    file are left. An empty file is a valid sample with zero points.
 
     Args:
-        check_ring (bool): Refuse a ``load_dim=5`` file whose fifth values
-            are not ring indices. Defaults to True.
-        **kwargs: The arguments of ``LoadPointsFromFile``.
+        load_dim (int, optional): Values per point in the files; None for
+            the sample's ``num_pts_feats``. Defaults to 6 (the parent's).
+        use_dim (int | list[int]): Columns kept (an int ``n``: the first
+            ``n``). Defaults to [0, 1, 2] (the parent's).
+        check_ring (bool): Refuse a 5-value file whose fifth values are not
+            ring indices. Defaults to True.
+        **kwargs: The other arguments of ``LoadPointsFromFile``.
 
     Required Keys:
 
@@ -166,8 +191,19 @@ class LoadOccPointsFromFile(LoadPointsFromFile):
       only if points were dropped.
     """
 
-    def __init__(self, check_ring: bool = True, **kwargs) -> None:
-        super().__init__(**kwargs)
+    def __init__(self,
+                 load_dim: Optional[int] = 6,
+                 use_dim=(0, 1, 2),
+                 check_ring: bool = True,
+                 **kwargs) -> None:
+        use_dim = list(range(use_dim)) if isinstance(use_dim, int) \
+            else list(use_dim)
+        # The parent checks use_dim against load_dim; with load_dim None
+        # that check runs per sample (transform).
+        super().__init__(
+            load_dim=max(use_dim) + 1 if load_dim is None else load_dim,
+            use_dim=use_dim, **kwargs)
+        self.load_dim = load_dim
         self.check_ring = check_ring
         self._kept_rows = None
 
@@ -196,10 +232,17 @@ class LoadOccPointsFromFile(LoadPointsFromFile):
                 ``load_dim``, or the file is refused.
         """
         recorded = results.get('num_pts_feats')
+        where = (f'{results.get("ann_file", "the info file")}: sample '
+                 f'{results.get("token", "?")}')
+        if self.load_dim is None:
+            if recorded is None:
+                raise ValueError(
+                    f'{where} records no num_pts_feats; give '
+                    'LoadOccPointsFromFile the values per point (load_dim)')
+            return self._transform_as(int(recorded), results, where)
         if recorded is not None and int(recorded) != self.load_dim:
             raise ValueError(
-                f'{results.get("ann_file", "the info file")}: sample '
-                f'{results.get("token", "?")} records {recorded} values per '
+                f'{where} records {recorded} values per '
                 f'LiDAR point (num_pts_feats), but load_dim is '
                 f'{self.load_dim}: {results["lidar_points"]["lidar_path"]} '
                 'would be read as garbage points.')
@@ -208,6 +251,20 @@ class LoadOccPointsFromFile(LoadPointsFromFile):
             results['points_kept_rows'] = self._kept_rows
             self._kept_rows = None
         return results
+
+    def _transform_as(self, load_dim: int, results: dict,
+                      where: str) -> dict:
+        """:meth:`transform` with the sample's ``load_dim`` (the parent
+        reads ``self.load_dim``)."""
+        if max(self.use_dim) >= load_dim:
+            raise ValueError(
+                f'{where} has {load_dim} values per LiDAR point '
+                f'(num_pts_feats), fewer than use_dim {self.use_dim} needs')
+        try:
+            self.load_dim = load_dim
+            return self.transform(results)
+        finally:
+            self.load_dim = None
 
     def __repr__(self) -> str:
         """str: The transform and its arguments."""
@@ -234,11 +291,16 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
       own sensor frame (see :mod:`.ego_points`), a box round the car where
       ``remove_close`` is a 1 m sphere round the sensor;
     * a key-frame ``pts_semantic_mask`` is padded with ``ignore_index``
-      for the sweep points, so that it stays aligned with ``points``.
+      for the sweep points, so that it stays aligned with ``points``;
+    * points of four values (x, y, z, intensity: a key frame loaded with
+      ``use_dim=4``, or the files of a LiDAR without ring index) get the
+      time lag appended as their column 4 instead of written over it.
 
     Args:
         sweeps_num (int): Sweeps to merge. Defaults to 10.
-        load_dim (int): Values per point in the files. Defaults to 5.
+        load_dim (int, optional): Values per point in the files; None for
+            the key frame's ``num_pts_feats`` (one sensor, one layout).
+            Defaults to 5.
         use_dim (list[int]): Columns kept. Defaults to [0, 1, 2, 3, 4]
             (x, y, z, intensity, time lag).
         ignore_index (int): Label of sweep points in
@@ -262,8 +324,10 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
 
     Required Keys:
 
-    - points (BasePoints): Key frame, at least 5 columns.
+    - points (BasePoints): Key frame, at least 4 columns.
     - timestamp (float): Key-frame time in seconds.
+    - num_pts_feats (int, optional): Values per point of the files, for
+      ``load_dim=None``.
     - lidar_sweeps (list[dict], optional): ``lidar_points.lidar_path``,
       ``lidar_points.lidar2sensor`` (or ``sensor2lidar``), ``timestamp``
       (and ``lidar_points.lidar2ego`` for ``ego_box``).
@@ -285,22 +349,44 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
 
     def __init__(self,
                  sweeps_num: int = 10,
-                 load_dim: int = 5,
+                 load_dim: Optional[int] = 5,
                  use_dim=(0, 1, 2, 3, 4),
                  ignore_index: int = 255,
                  ego_box: Optional[Sequence[float]] = None,
                  check_ring: bool = True,
                  record_ring: bool = False,
                  **kwargs) -> None:
+        use_dim = list(range(use_dim)) if isinstance(use_dim, int) \
+            else list(use_dim)
+        if load_dim is not None and load_dim < 4:
+            raise ValueError('LoadOccPointsFromMultiSweeps needs files of at '
+                             'least x, y, z, intensity (load_dim >= 4), got '
+                             f'load_dim={load_dim}')
+        # Column 4 (the time lag) exists whatever the files hold: the
+        # parent's check of use_dim against load_dim does not apply.
         super().__init__(
             sweeps_num=sweeps_num,
-            load_dim=load_dim,
-            use_dim=list(use_dim),
+            load_dim=max(use_dim + [4]) + 1,
+            use_dim=use_dim,
             **kwargs)
+        self.load_dim = load_dim
         self.ignore_index = ignore_index
         self.ego_box = None if ego_box is None else check_ego_box(ego_box)
         self.check_ring = check_ring
         self.record_ring = record_ring
+
+    def _ring(self, points: np.ndarray, path) -> Optional[np.ndarray]:
+        """A copy of the ring column of ``points`` with ``record_ring``
+        (None without), refusing files that have none."""
+        if not self.record_ring:
+            return None
+        if points.shape[1] <= RING_COLUMN:
+            raise ValueError(
+                f'{self.__class__.__name__}(record_ring=True) needs the ring '
+                f'index (the fifth value of a point), but {path} holds '
+                f'{points.shape[1]} values a point (a LiDAR without ring '
+                'index): a transform that drops beams cannot run on it')
+        return points[:, RING_COLUMN].copy()
 
     @staticmethod
     def sweep_to_key(sweep: dict) -> np.ndarray:
@@ -342,23 +428,30 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
             dict: The state with merged ``points``.
         """
         points = results['points']
-        if points.tensor.shape[1] < 5:
+        if points.tensor.shape[1] < 4:
             raise ValueError(
                 f'{self.__class__.__name__} needs key-frame points with at '
-                f'least 5 columns (column 4 becomes the time lag), got '
-                f'{points.tensor.shape[1]} for {results.get("lidar_path")}')
-        key_ring = points.tensor[:, RING_COLUMN].numpy().copy()
-        points.tensor[:, 4] = 0
-        key = points.tensor.numpy()
+                f'least 4 columns (x, y, z, intensity; column 4 becomes the '
+                f'time lag), got {points.tensor.shape[1]} for '
+                f'{results.get("lidar_path")}')
+        key_ring = self._ring(points.tensor.numpy(),
+                              results.get('lidar_path'))
+        key = with_time_lag(points.tensor.numpy(), 0.0)
+        load_dim = self.load_dim or int(results.get(
+            'num_pts_feats', NUM_POINT_FEATS))
         parts, rings = [key], [key_ring]
         sweeps = results.get('lidar_sweeps')
         if sweeps is None:
             if self.pad_empty_sweeps:
-                pad = np.column_stack([key, key_ring])
+                # The ring rides along as a last column through the filter.
+                pad = key if key_ring is None else np.column_stack(
+                    [key, key_ring])
                 if self.remove_close:
                     pad = self._remove_close(pad)
-                parts += [pad[:, :-1]] * self.sweeps_num
-                rings += [pad[:, -1]] * self.sweeps_num
+                if key_ring is not None:
+                    rings += [pad[:, -1]] * self.sweeps_num
+                    pad = pad[:, :-1]
+                parts += [pad] * self.sweeps_num
         else:
             token = results.get('token', '?')
             key_time = _seconds(results['timestamp'],
@@ -370,7 +463,7 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
                     sweep['timestamp'],
                     f'sample {token}: timestamp of sweep {path}')
                 arr = read_points_file(
-                    path, self.load_dim,
+                    path, load_dim,
                     f'LiDAR sweep of sample {results.get("token", "?")}',
                     self.backend_args, check_ring=self.check_ring)
                 if self.remove_close:
@@ -384,10 +477,11 @@ class LoadOccPointsFromMultiSweeps(LoadPointsFromMultiSweeps):
                         self.ego_box)
                 mat = self.sweep_to_key(sweep).astype(np.float32)
                 arr[:, :3] = arr[:, :3] @ mat[:3, :3].T + mat[:3, 3]
-                rings.append(arr[:, RING_COLUMN].copy())
-                arr[:, 4] = key_time - sweep_time
-                parts.append(arr)
+                rings.append(self._ring(arr, path))
+                parts.append(with_time_lag(arr, key_time - sweep_time))
         num_key = len(points)
+        if key.shape[1] != points.tensor.shape[1]:  # time lag appended
+            points = type(points)(key, points_dim=key.shape[1])
         results['points'] = self._merge(points, parts)
         # Tells later transforms which column separates key frame / sweeps.
         results['points_time_dim'] = self.use_dim.index(4) \

@@ -195,7 +195,10 @@ def test_depth_bin_accuracy_of_an_oracle_on_the_real_depths(real_info):
     assert uniform.summary()['prob_true'] == pytest.approx(0.02)
 
 
-TINY = sorted(glob.glob(osp.join(REPO, 'configs', '*', '*_tiny_*.py')))
+#: Of the nuScenes rig (the four-camera rig's configs name other cameras).
+TINY = sorted(p for p in glob.glob(osp.join(REPO, 'configs', '*',
+                                            '*_tiny_*.py'))
+              if '-quad-' not in p)
 #: The label steps of the test pipelines: the sample has no labels.
 LABEL_STEPS = ('LoadOccupancyGT', 'PointsToSemanticMaps')
 

@@ -25,13 +25,13 @@ converter (:mod:`.report`); a missing key frame or image is an error.
 import json
 import os
 import os.path as osp
-from typing import Dict, Optional, Tuple
+from typing import Dict, Optional, Sequence, Tuple
 
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
 from ...fileio.safe_pickle import load_info_file
-from ..info_format import CAMERA_NAMES, weather_flags
+from ..info_format import camera_order, weather_flags
 from .key_frame_links import link_previous_key_frames
 from .label_files import label_roots, occ_label_paths
 from .nuscenes_occ_converter import write_info_file
@@ -150,7 +150,8 @@ def _sweeps(entry: dict, files: _Resolver, report: ConversionReport) -> list:
 def extend_entry(entry: dict, files: _Resolver, scenes: Dict[str, dict],
                  roots: Tuple[Optional[str], Optional[str]],
                  occ3d_scenes: Dict[str, str],
-                 report: ConversionReport) -> dict:
+                 report: ConversionReport,
+                 cameras: Optional[Sequence[str]] = None) -> dict:
     """Our info entry for one sample of an mmdet3d v2 info file.
 
     Args:
@@ -161,6 +162,9 @@ def extend_entry(entry: dict, files: _Resolver, scenes: Dict[str, dict],
         roots (tuple): SurroundOcc and Occ3D label folders (or None).
         occ3d_scenes (dict): Sample token -> Occ3D scene folder.
         report (ConversionReport): Where problems are recorded.
+        cameras (Sequence[str], optional): The cameras every sample must
+            have, in order. Defaults to the entry's own
+            (:func:`~..info_format.camera_order`).
 
     Returns:
         dict: The entry in this library's info layout.
@@ -170,7 +174,7 @@ def extend_entry(entry: dict, files: _Resolver, scenes: Dict[str, dict],
     lidar_path = files.need(lidar['lidar_path'], 'samples/LIDAR_TOP',
                             'LiDAR key frame', token)
     images = {}
-    for cam in CAMERA_NAMES:
+    for cam in cameras or camera_order(entry['images']):
         if cam not in entry['images']:
             raise ValueError(f'{files.info_file}: sample {token} has no '
                              f'{cam} image; it has {sorted(entry["images"])}')
@@ -275,13 +279,17 @@ def extend_mmdet3d_info_file(info_file: str,
     scenes = _scene_index(root_path, version)
     occ3d_scenes = _occ3d_index(roots[1])
     report = ConversionReport()
+    # Every sample links the first one's cameras, in one order.
+    cameras = camera_order(infos['data_list'][0]['images']) \
+        if infos['data_list'] else ()
     entries = [
-        extend_entry(entry, files, scenes, roots, occ3d_scenes, report)
-        for entry in infos['data_list']
+        extend_entry(entry, files, scenes, roots, occ3d_scenes, report,
+                     cameras) for entry in infos['data_list']
     ]
     link_previous_key_frames(entries)
     os.makedirs(out_dir, exist_ok=True)
     write_info_file(target, entries, version, split, synthetic=False,
+                    cameras=cameras,
                     extended_from=osp.basename(info_file),
                     mmdet3d_info_version=meta.get('info_version'))
     report.emit(info_file)

@@ -20,6 +20,12 @@ Splits:
     description mentions rain / night. A ``train``, ``val`` or ``test``
     split without any scene is an error naming the scenes there are.
 
+Cameras and LiDAR layout come from the data: the cameras are the
+``camera`` channels of the ``sensor`` table (the six nuScenes cameras in
+mmdet3d's order, any other rig in its table's order), and the values per
+LiDAR point are nuScenes' five unless given (a synthetic world records
+its own).
+
 Every file an info links (key frame, sweeps, images, lidarseg labels,
 occupancy labels) is checked to exist; an occupancy label folder that does
 not exist at all is recorded as ``None`` (with a warning) because users often
@@ -28,6 +34,7 @@ the conversion; missing sweeps, a missing label file or a lidarseg /
 panoptic table without its files are reported at the end and the rest is
 converted (:mod:`.report` says why each is safe).
 """
+import json
 import multiprocessing
 import os
 import os.path as osp
@@ -40,7 +47,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from ..info_format import (CAMERA_NAMES, INFO_VERSION, NUM_POINT_FEATS,
-                           weather_flags)
+                           camera_order, weather_flags)
 from ..nuscenes_classes import OCC_CLASS_NAMES
 from .devkit_view import devkit_view
 from .key_frame_links import link_previous_key_frames
@@ -81,16 +88,54 @@ def _must_exist(path: str, what: str, sample_token: str) -> None:
             f'{what} of sample {sample_token} not found: {path}')
 
 
+def rig_cameras(sensors: Sequence[dict]) -> Tuple[str, ...]:
+    """The camera channels of a database's ``sensor`` table, in the order
+    the info files list them.
+
+    Args:
+        sensors (Sequence[dict]): ``sensor`` records (``channel``,
+            ``modality``).
+
+    Returns:
+        tuple[str, ...]: nuScenes' six cameras in mmdet3d's order
+        (:data:`~..info_format.CAMERA_NAMES`) when the rig is theirs, any
+        other rig's cameras in the table's order.
+
+    Raises:
+        ValueError: If the table lists no camera.
+    """
+    found = [s['channel'] for s in sensors if s['modality'] == 'camera']
+    if not found:
+        channels = [s['channel'] for s in sensors]
+        raise ValueError('the sensor table lists no camera (modality '
+                         f"'camera'); it has {channels}")
+    return camera_order(found)
+
+
+def synthetic_point_dims(root_path: str) -> Optional[int]:
+    """Values per LiDAR point of a synthetic world (5 with the ring index,
+    4 without), or None for a root the generator did not write."""
+    if not is_synthetic_root(root_path):
+        return None
+    with open(osp.join(root_path, SYNTHETIC_MARKER)) as f:
+        parameters = json.load(f).get('parameters', {})
+    # Worlds written before the option existed all have the ring index.
+    return NUM_POINT_FEATS if parameters.get('lidar_ring', True) else 4
+
+
 class _Context:
     """What every sample needs: the devkit handle and the label roots."""
 
     def __init__(self, nusc, root: str, surroundocc_root: Optional[str],
-                 occ3d_root: Optional[str], max_sweeps: int):
+                 occ3d_root: Optional[str], max_sweeps: int,
+                 num_pts_feats: int = NUM_POINT_FEATS):
         self.nusc = nusc
         self.root = root
         self.surroundocc_root = surroundocc_root
         self.occ3d_root = occ3d_root
         self.max_sweeps = max_sweeps
+        self.num_pts_feats = num_pts_feats
+        self.cam_names = rig_cameras(nusc.sensor)
         self.has_lidarseg = hasattr(nusc, 'lidarseg')
         self.report = ConversionReport()
 
@@ -192,15 +237,15 @@ def _label_paths(ctx: _Context, sample: dict, scene: dict,
 
 
 def sample_info(ctx: _Context, sample: dict, scene: dict,
-                cam_names: Sequence[str] = CAMERA_NAMES) -> dict:
+                cam_names: Optional[Sequence[str]] = None) -> dict:
     """The info dict of one key frame (``sample_idx`` is set by the caller).
 
     Args:
         ctx (_Context): Devkit handle and label roots.
         sample (dict): A ``sample`` record.
         scene (dict): Its ``scene`` record.
-        cam_names (Sequence[str]): Cameras to link. Defaults to the six
-            nuScenes cameras in mmdet3d's order.
+        cam_names (Sequence[str], optional): Cameras to link. Defaults to
+            the rig's (:func:`rig_cameras`).
 
     Returns:
         dict: One ``data_list`` entry (see the module docstring).
@@ -209,6 +254,13 @@ def sample_info(ctx: _Context, sample: dict, scene: dict,
     lidar_sd = nusc.get('sample_data', sample['data']['LIDAR_TOP'])
     lidar_path = osp.join(ctx.root, lidar_sd['filename'])
     _must_exist(lidar_path, 'LiDAR key frame', sample['token'])
+    point_bytes = 4 * ctx.num_pts_feats
+    if osp.getsize(lidar_path) % point_bytes:
+        raise ValueError(
+            f'LiDAR key frame of sample {sample["token"]}: {lidar_path} has '
+            f'{osp.getsize(lidar_path)} bytes, not a whole number of points '
+            f'of {ctx.num_pts_feats} float32 values; pass the values per '
+            'point of your LiDAR files (--num-pts-feats).')
     cs = nusc.get('calibrated_sensor', lidar_sd['calibrated_sensor_token'])
     ep = nusc.get('ego_pose', lidar_sd['ego_pose_token'])
     lidar2ego, ego2global = pose_matrix(cs), pose_matrix(ep)
@@ -225,11 +277,12 @@ def sample_info(ctx: _Context, sample: dict, scene: dict,
         next=sample['next'],
         ego2global=ego2global.tolist(),
         lidar_points=dict(
-            num_pts_feats=NUM_POINT_FEATS,
+            num_pts_feats=ctx.num_pts_feats,
             lidar_path=rel_path(lidar_path, ctx.root),
             lidar2ego=lidar2ego.tolist()),
         lidar_sweeps=_sweeps(ctx, lidar_sd, global2lidar, sample['token']),
-        images=_images(ctx, sample, global2lidar, cam_names))
+        images=_images(ctx, sample, global2lidar,
+                       ctx.cam_names if cam_names is None else cam_names))
     info.update(_label_paths(ctx, sample, scene, lidar_sd))
     return info
 
@@ -284,7 +337,9 @@ def split_scenes(scene_names: Sequence[str],
 
 
 def write_info_file(path: str, entries: List[dict], version: str,
-                    split: str, synthetic: bool, **extra) -> None:
+                    split: str, synthetic: bool,
+                    cameras: Sequence[str] = CAMERA_NAMES,
+                    **extra) -> None:
     """Write one ``dict(metainfo, data_list)`` info file.
 
     Args:
@@ -293,6 +348,8 @@ def write_info_file(path: str, entries: List[dict], version: str,
         version (str): nuScenes version.
         split (str): Split name.
         synthetic (bool): Written from a synthetic world.
+        cameras (Sequence[str]): The cameras every sample links, in order.
+            Defaults to nuScenes' six.
         **extra: Further metainfo.
     """
     import mmengine
@@ -305,7 +362,7 @@ def write_info_file(path: str, entries: List[dict], version: str,
         scenes=sorted({str(e['scene_name'])
                        for e in entries}),
         synthetic=synthetic,
-        cameras=CAMERA_NAMES,
+        cameras=tuple(cameras),
         **extra)
     data_list = [dict(e, sample_idx=i) for i, e in enumerate(entries)]
     mmengine.dump(dict(metainfo=metainfo, data_list=data_list), path)
@@ -362,7 +419,9 @@ def create_nuscenes_occ_infos(root_path: str,
                               max_sweeps: int = 10,
                               val_scenes: Optional[Sequence[str]] = None,
                               overwrite: bool = False,
-                              workers: int = 0) -> Dict[str, str]:
+                              workers: int = 0,
+                              num_pts_feats: Optional[int] = None
+                              ) -> Dict[str, str]:
     """Write the info files of a nuScenes root (real or synthetic).
 
     Args:
@@ -383,6 +442,9 @@ def create_nuscenes_occ_infos(root_path: str,
         overwrite (bool): Replace existing info files. Defaults to False.
         workers (int): Processes converting samples (0 or 1: this one).
             Defaults to 0.
+        num_pts_feats (int, optional): float32 values per point of the
+            LiDAR files. Defaults to a synthetic world's own (4 or 5), else
+            nuScenes' 5 (x, y, z, intensity, ring).
 
     Returns:
         dict[str, str]: Split name -> written file.
@@ -419,7 +481,12 @@ def create_nuscenes_occ_infos(root_path: str,
             verbose=False)
     finally:
         shutil.rmtree(view_dir)
-    ctx = _Context(nusc, root_path, *roots, max_sweeps)
+    if num_pts_feats is None:
+        num_pts_feats = synthetic_point_dims(root_path) or NUM_POINT_FEATS
+    if not isinstance(num_pts_feats, int) or num_pts_feats < 3:
+        raise ValueError('num_pts_feats must be an int >= 3 (x, y, z '
+                         f'first), got {num_pts_feats!r}')
+    ctx = _Context(nusc, root_path, *roots, max_sweeps, num_pts_feats)
     ctx.report = report
     scenes = {s['name']: s for s in nusc.scene}
     synthetic = is_synthetic_root(root_path)
@@ -457,6 +524,7 @@ def create_nuscenes_occ_infos(root_path: str,
                   f'{split[4:].replace("rainy", "rain")})')
     os.makedirs(out_dir, exist_ok=True)
     for split, entries in data.items():
-        write_info_file(targets[split], entries, version, split, synthetic)
+        write_info_file(targets[split], entries, version, split, synthetic,
+                        cameras=ctx.cam_names)
     ctx.report.emit(f'{root_path} ({version})')
     return targets
