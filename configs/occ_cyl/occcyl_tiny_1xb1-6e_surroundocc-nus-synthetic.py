@@ -62,10 +62,9 @@ val_evaluator = test_evaluator = _base_._occ_metric
 max_epochs = 6
 train_cfg = dict(max_epochs=max_epochs, val_interval=max_epochs)
 # lr 2e-3 (40x the paper's), no decay: a from-scratch tiny model on a few
-# samples. The small config's warm-up (50 iterations from a tenth; the
-# paper's is 500 from a third): without it the first steps (gradient norms
-# 130-245, above the clip of 35) overshoot and after 8 iterations the model
-# predicts every voxel empty.
+# samples. The small config's warm-up (50 iterations from a tenth; the paper's:
+# 500 from a third): without it the first steps (gradient norms 130-245, over
+# the clip of 35) overshoot; by iteration 8 every voxel is predicted empty.
 optim_wrapper = dict(optimizer=dict(lr=2e-3))
 param_scheduler = _base_.param_scheduler[:1]
 default_hooks = dict(checkpoint=dict(interval=max_epochs))

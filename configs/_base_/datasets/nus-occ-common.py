@@ -33,9 +33,8 @@ _sweeps = dict(
     type='LoadOccPointsFromMultiSweeps', sweeps_num=sweeps_num,
     load_dim=None, ego_box=ego_box, backend_args=backend_args)
 _images = dict(type='LoadMultiViewImagesOcc', backend_args=backend_args)
-# Up to the occupancy labels: points, sweeps, images and (training) BEVDet's
-# image augmentation, +-6 % scale, random horizontal crop, flips and
-# +-5.4 deg rotation.
+# Up to the labels: points, sweeps, images and (training) BEVDet's image
+# augmentation: +-6 % scale, random horizontal crop, flips, +-5.4 deg rotation.
 train_inputs = [
     _key_frame, _remove_ego, _sweeps, _images,
     dict(type='MultiViewImageAug', final_size=img_size,
@@ -93,9 +92,8 @@ ray_iou_metric = dict(
 #       data/nuscenes_synthetic
 #   python tools/create_data.py nuscenes --root-path data/nuscenes_synthetic \
 #       --version v1.0-mini
-# (the converter splits the world's last scenes off as val). Worker
-# processes only add start-up time on a few samples, and there is no device
-# memory to pin for on the CPU.
+# (the converter splits the world's last scenes off as val). On CPU, workers
+# only add start-up time on a few samples; there is no device memory to pin.
 _synthetic_root = 'data/nuscenes_synthetic/'
 _synthetic_loader = dict(
     num_workers=0, persistent_workers=False, pin_memory=False)

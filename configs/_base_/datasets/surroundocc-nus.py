@@ -9,12 +9,11 @@ custom_imports = dict(imports=['projects.occ_common'],
 # semantic targets (gt_seg_2d).
 train_pipeline, test_pipeline, train_pipeline_seg2d, test_pipeline_seg2d = [
     inputs + _base_._labels + targets + _base_._crop_and_pack
-    for inputs, targets in [(_base_.train_inputs, _base_.train_targets),
-                            (_base_.test_inputs, _base_.test_targets),
-                            (_base_.train_inputs_seg2d,
-                             _base_.train_targets_seg2d),
-                            (_base_.test_inputs_seg2d,
-                             _base_.test_targets_seg2d)]]
+    for inputs, targets in [
+        (_base_.train_inputs, _base_.train_targets),
+        (_base_.test_inputs, _base_.test_targets),
+        (_base_.train_inputs_seg2d, _base_.train_targets_seg2d),
+        (_base_.test_inputs_seg2d, _base_.test_targets_seg2d)]]
 train_dataloader = dict(
     dataset=dict(_base_._occ_dataset, pipeline=train_pipeline))
 val_dataloader = test_dataloader = dict(

@@ -58,8 +58,7 @@ model = dict(
             # mmdet.ResNet, whose with_cp also recomputes the first block
             # after the frozen stage (~1.4 GiB at 6 x 928 x 1600).
             type='RecomputedResNet', depth=50, num_stages=4,
-            # Stages 0, 1, 2 and 3 feed the FPN (paper, Sec. IV.A).
-            out_indices=(0, 1, 2, 3),
+            out_indices=(0, 1, 2, 3),  # all feed the FPN (paper, Sec. IV.A)
             # Stage 1 and BN statistics and affine frozen, as OCCFusion's
             # (and mmdet's fine-tuning) ResNet.
             frozen_stages=1, norm_cfg=dict(type='BN', requires_grad=False),
@@ -81,8 +80,7 @@ model = dict(
         type='DepthNet', in_channels=_v_channels, mid_channels=_v_channels,
         context_channels=_context_channels, with_depth_feature=True,
         camera_param_dims=22,  # BEVDepth's camera-aware depth
-        # Recompute the depth branch (~1.9 GiB kept otherwise; exact).
-        with_cp=True),
+        with_cp=True),  # recompute (exact; ~1.9 GiB kept otherwise)
     point_branch=dict(
         type='LidarPointBranch', in_channels=_point_dims,
         img_channels=_context_channels,
@@ -103,10 +101,9 @@ model = dict(
     tpv_encoder=dict(
         type='TPVPlaneEncoder',
         backbone=dict(
-            # mmdet's Swin, recomputing non-reentrantly.
-            type='RecomputedSwinTransformer', in_channels=_plane_channels,
-            embed_dims=_swin_dims[0], depths=[2, 2, 18, 2],
-            num_heads=[3, 6, 12, 24], window_size=7,
+            type='RecomputedSwinTransformer',  # mmdet's; non-reentrant with_cp
+            in_channels=_plane_channels, embed_dims=_swin_dims[0],
+            depths=[2, 2, 18, 2], num_heads=[3, 6, 12, 24], window_size=7,
             # Patch stride 2 (not 4): the finest level then has half the
             # plane resolution, matching the 200x200x16 output better.
             patch_size=2, strides=(2, 2, 2, 2), out_indices=(0, 1, 2, 3),
@@ -151,16 +148,14 @@ auto_scale_lr = dict(enable=False, base_batch_size=3)  # 3 GPUs x 1 (paper)
 
 # Inputs applied to the dataset base's pipelines: 1600x900 images and "10
 # LiDAR sweeps", as OCCFusion's code the key frame and 9 sweeps.
-paper_inputs = dict(
-    MultiViewImageAug=dict(final_size=(900, 1600)),
-    LoadOccPointsFromMultiSweeps=dict(sweeps_num=9))
+paper_inputs = dict(MultiViewImageAug=dict(final_size=(900, 1600)),
+                    LoadOccPointsFromMultiSweeps=dict(sweeps_num=9))
 # Augmentation (the paper names none): the lineage's (SurroundOcc,
 # OCCFusion) colour distortion per view, no geometric change (small config:
 # 20.05 mIoU with BEV flips, 25.57 without); ablations/occcyl-geoaug_* has it.
 lineage_train_aug = dict(
-    MultiViewImageAug=dict(
-        resize_range=(1.0, 1.0), crop_x_range=(0.5, 0.5), flip_prob=0.0,
-        rot_range=(0.0, 0.0)),
+    MultiViewImageAug=dict(resize_range=(1.0, 1.0), crop_x_range=(0.5, 0.5),
+                           flip_prob=0.0, rot_range=(0.0, 0.0)),
     OccBEVAug=dict(flip_x_prob=0.0, flip_y_prob=0.0))
 # Inserted after MultiViewImageAug in the training pipeline.
 lineage_photometric = dict(type='MultiViewPhotoMetric')

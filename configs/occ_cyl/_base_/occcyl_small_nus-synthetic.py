@@ -1,9 +1,8 @@
-# The small OccCylindrical of the held-out learning benchmark on the
-# synthetic nuScenes-format world, without a label format or a runtime
-# (../occcyl*_small_* add a task file and the CPU runtime; ../occcyl_tiny_*
-# shrinks it): the paper's modules at a fraction of its width and
-# resolution, trained from scratch in about an hour of 2 CPU cores. Numbers:
-# held-out IoU / mIoU from docs/reports/learning_benchmark.md.
+# The small OccCylindrical of the held-out learning benchmark on the synthetic
+# nuScenes-format world, without label format or runtime (../occcyl*_small_*
+# add a task file and the CPU runtime; ../occcyl_tiny_* shrinks it): the
+# paper's modules at a fraction of its width and resolution, from scratch in
+# ~1 h of 2 CPU cores. Held-out IoU / mIoU: docs/reports/learning_benchmark.md.
 _base_ = ['../../_base_/datasets/nus-occ-common.py', './occcyl_r50-swins.py']
 
 _img_channels = _plane_channels = 32
@@ -63,9 +62,8 @@ model = dict(
         neck=dict(in_channels=_swin_dims, out_channels=_plane_channels)),
     # The head's MLP as wide as the planes (the paper gives no width): four
     # times wider was slower, no better (71.4 / 34.5 in the hour).
-    occ_head=dict(
-        in_channels=_plane_channels, hidden_channels=_plane_channels,
-        with_cp=False))
+    occ_head=dict(in_channels=_plane_channels, hidden_channels=_plane_channels,
+                  with_cp=False))
 # The depth loss keeps the paper's weight 3 (its Table V, on nuScenes),
 # though it has not helped on the synthetic world (at lr 4e-3 72.53 / 35.81
 # with it, 72.80 / 36.82 without; a tie at 1.5x the iterations).

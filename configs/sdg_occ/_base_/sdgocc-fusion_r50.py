@@ -6,8 +6,7 @@ custom_imports = dict(imports=['projects.occ_common', 'projects.sdg_occ'],
                       allow_failed_imports=False)
 
 _img_stride = 16  # image features at 1/16 (paper)
-# 2D semantic classes: "no class" 0 (eq. 2) and the 16 lidarseg classes.
-_num_seg_classes = 17
+_num_seg_classes = 17  # 2D: "no class" 0 (eq. 2), 16 lidarseg classes
 _point_dims = 5  # x, y, z, intensity, time lag of the merged sweeps
 # Widths (not in the paper): BEVDet-Occ / FlashOcc's (the release's) camera
 # BEV, image and head features; the SPVCNN encoder's default LiDAR BEV.
@@ -16,8 +15,7 @@ _cam_channels, _lidar_channels = 64, 128
 
 model = dict(
     type='SDGOcc',
-    # ImageNet statistics, matching the pretrained backbone.
-    data_preprocessor=dict(
+    data_preprocessor=dict(  # ImageNet statistics, as the pretrained backbone
         type='Det3DDataPreprocessor', mean=[123.675, 116.28, 103.53],
         std=[58.395, 57.12, 57.375], bgr_to_rgb=True, pad_size_divisor=32),
     downsample=_img_stride,
@@ -53,10 +51,9 @@ model = dict(
         camera_param_dims=22,  # BEVDepth's camera-aware depth, as BEVDet
         seg_channels=_num_seg_classes, with_cp=True),
     view_transform=dict(
-        type='SDGViewTransform',
         # Diffusion radius (not in the paper): 2 feature cells = 32 pixels,
         # about one object width at 20 m.
-        diffusion_radius=2.0,
+        type='SDGViewTransform', diffusion_radius=2.0,
         # r = 1 m, l = 8 (paper, Table 4): 17 virtual points 0.125 m apart.
         layer_radius=1.0, num_layers=8, fallback='lss', use_sdg=True),
     lidar_encoder=dict(
@@ -68,10 +65,9 @@ model = dict(
         # point's offsets to its voxel's mean and centre.
         point_offsets=True),
     fusion=dict(
-        type='NeighborhoodFusion',
         # Widths from the detector. Not in the paper: the release's three
         # layers 256 wide in 8 heads (NATBlock(dim=256, depth=3, heads=8)).
-        embed_dims=256, num_heads=8, num_layers=3,
+        type='NeighborhoodFusion', embed_dims=256, num_heads=8, num_layers=3,
         kernel_size=7),  # neighbourhood k = 7 (paper, Table 5)
     bev_encoder=dict(
         type='SDGBEVEncoder', in_channels=_cam_channels,
@@ -82,8 +78,7 @@ model = dict(
         out_channels=_bev_channels),
     occ_head=dict(
         type='ChannelToHeightHead', in_channels=_bev_channels,
-        mid_channels=_bev_channels,
-        num_convs=1,  # FlashOcc's single 3x3 conv before the predictor
+        mid_channels=_bev_channels, num_convs=1,  # FlashOcc's: one 3x3 conv
         # FlashOcc's masked cross-entropy on Occ3D (focal, gamma = 0).
         loss_occ=dict(type='OccupancyLoss', losses=[
             dict(type='OccFocalLoss', gamma=0.0, loss_weight=1.0)])),
@@ -113,9 +108,8 @@ kl_model = dict(
     loss_distill=dict(type='FOADDistillLoss', alpha=1.0, beta=1.0,
                       loss_weight=1.0),
     # "The sum of distillation and classification loss" (Sec. 3.5): one
-    # occupancy loss, on the fused BEV through the one head the camera BEV
-    # uses at inference, as the release. Before 2026-11-28: 'three_loss'
-    # with separate_teacher_head=True.
+    # occupancy loss, on the fused BEV through the camera BEV's inference head,
+    # as the release (until 2026-11-28: 'three_loss', separate_teacher_head).
     kl_losses='paper')
 # Table 3's rows without SDG (ablations/*-lss*): the plain LSS lift, no 2D
 # semantics (as FlashOcc), depth supervision kept. The camera rows have no
@@ -139,10 +133,9 @@ bevdet_pretrained = dict(
         key_map=[(r'^layers\.', 'stages.')], ignore=[r'\.downsample\.'],
         allow_missing=[r'\.shortcut\.', r'^merges\.', r'^out\.']))
 
-# AdamW lr 1e-4 with clipping (paper); decay, clip norm, warm-up and 24
-# epochs as BEVDet-Occ / FlashOcc; 4 x 2 samples assumed (auto_scale_lr).
-# Kept against the release (untrained, 41311d5): 24 epochs (48), clip 5 (2),
-# no EMA, the key frame plus 10 sweeps (the key frame only).
+# AdamW lr 1e-4 with clipping (paper); decay, clip norm, warm-up, 24 epochs:
+# BEVDet-Occ / FlashOcc's. Kept against the release (untrained, 41311d5): 24
+# epochs (48), clip 5 (2), no EMA, key frame + 10 sweeps (key frame only).
 max_epochs = 24
 train_cfg = dict(type='EpochBasedTrainLoop', max_epochs=max_epochs,
                  val_interval=max_epochs)
@@ -153,4 +146,4 @@ optim_wrapper = dict(
     clip_grad=dict(max_norm=5, norm_type=2))
 param_scheduler = [dict(type='LinearLR', start_factor=1e-3, by_epoch=False,
                         begin=0, end=200)]
-auto_scale_lr = dict(enable=False, base_batch_size=8)
+auto_scale_lr = dict(enable=False, base_batch_size=8)  # assumed: 4 GPUs x 2

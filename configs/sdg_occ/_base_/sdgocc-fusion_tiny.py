@@ -40,12 +40,10 @@ tiny_model = dict(
         # and scene-class affinity (OccCylindrical's eq. 18 set) optimise
         # per-class IoU directly.
         loss_occ=dict(losses=[
-            dict(type='OccFocalLoss', gamma=0.0),
-            dict(type='OccLovaszLoss'),
+            dict(type='OccFocalLoss', gamma=0.0), dict(type='OccLovaszLoss'),
             dict(type='SceneClassAffinityLoss', mode='geo'),
             dict(type='SceneClassAffinityLoss', mode='sem')])))
-# 1 m depth bins (the full configs use 0.5 m) halve the LSS fallback's points.
-tiny_depth_step = 1.0
+tiny_depth_step = 1.0  # 1 m bins (full: 0.5 m) halve the LSS fallback's points
 tiny_img_size = (128, 352)  # half the paper's 256x704 per side
 # lr 2e-3 (20x the paper's): a from-scratch tiny model on a few samples.
 tiny_optim_wrapper = dict(optimizer=dict(lr=2e-3))
