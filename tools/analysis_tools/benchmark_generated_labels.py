@@ -58,6 +58,7 @@ from projects.occ_common.datasets.occupancy_labels.voxelization import \
 from projects.occ_common.datasets.occupancy_labels.writers import (
     OCC3D_DIR, SURROUNDOCC_DIR)
 from projects.occ_common.evaluation.label_quality import LabelQuality
+from projects.occ_common.fileio.safe_names import safe_file_name
 
 #: Variant name -> (column title, LabelConfig changes).
 VARIANTS = {
@@ -115,8 +116,11 @@ def reach(root: str, version: str, scenes=None) -> dict:
         for frame in sequence.key_frames:
             seen = lidar_mask(grid, np.linalg.inv(frame.ego2global), rays,
                               cfg.no_return_range)
-            with np.load(osp.join(root, OCC3D_DIR, sequence.name,
-                                  frame.token, 'labels.npz')) as f:
+            path = osp.join(root, OCC3D_DIR,
+                            safe_file_name(sequence.name, 'scene name'),
+                            safe_file_name(frame.token, 'sample token'),
+                            'labels.npz')
+            with np.load(path) as f:
                 semantics = f['semantics']
             solid = semantics != OCC3D_FREE_LABEL
             occupied += np.bincount(semantics[solid], minlength=num)

@@ -20,6 +20,7 @@ from typing import Dict, List, Optional
 import numpy as np
 
 from ...apis.split_dataset import build_split_dataset
+from ...fileio.safe_names import safe_file_name
 from .calibration import check_calibration
 from .class_histogram import check_histogram, split_histogram
 from .grid import LabelGrid, grid_config_check, grid_from_config
@@ -146,7 +147,8 @@ def run_doctor(cfg,
             for name, picture in (('cameras', camera_picture(sample, grid)),
                                   ('bev', bev_picture(sample, grid))):
                 if picture is not None:
-                    rel = osp.join('pictures', f'{sample.token}_{name}.png')
+                    token = safe_file_name(sample.token, 'sample token')
+                    rel = osp.join('pictures', f'{token}_{name}.png')
                     save_png(picture, osp.join(out_dir, rel))
                     report.pictures.append(rel)
     report.seconds_per_sample = float(np.mean(seconds)) if seconds \
