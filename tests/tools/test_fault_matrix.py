@@ -121,3 +121,20 @@ def test_every_mutation_is_caught():
     result = matrix.main(['--mutations'])
     assert not result['wrong'] and len(result['mutations']) == len(
         matrix.testable_mutations())
+
+
+def test_an_earlier_install_does_not_hide_a_removed_guard():
+    """The restricted loader installed in this process earlier (as a test
+    before, or tools/test.py, does) must not stand in for the install that
+    a mutation removes from init_model: each case's child starts without
+    it. Before, this mutation went unnoticed in a pytest worker that had
+    installed the loader (both TorchScript cases still refused clearly)."""
+    from argparse import Namespace
+
+    from projects.occ_common.fileio import install_checkpoint_loader
+    install_checkpoint_loader()
+    result = matrix.run_mutations(['init_model loads restricted'],
+                                  Namespace(timeout=120))
+    assert result['wrong'] == []
+    seen = result['mutations']['init_model loads restricted']
+    assert set(seen.values()) == {'unclear error'}, seen

@@ -45,6 +45,8 @@ from projects.occ_common.analysis.fault_cases_files import FILE_CASES
 from projects.occ_common.analysis.fault_cases_inputs import INPUT_CASES
 from projects.occ_common.analysis.fault_cases_runs import RUN_CASES
 from projects.occ_common.analysis.fault_mutations import MUTATIONS
+from projects.occ_common.fileio.checkpoint_schemes import \
+    uninstall_checkpoint_loader
 
 #: Every case, in the order printed.
 CASES: List[Case] = FILE_CASES + RUN_CASES + INPUT_CASES
@@ -75,6 +77,9 @@ def _child(case: Case, path: str, conn, folder: str,
                       os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
         os.dup2(out, fd)
     start = _resident_kb(os.getpid())
+    # Each case starts as a fresh process would: without the restricted
+    # loader that a test or case before it installed in the parent.
+    uninstall_checkpoint_loader()
     try:
         if mutation is not None:
             from projects.occ_common.analysis.source_mutation import mutate

@@ -104,6 +104,10 @@ SCHEMES = {
 }
 
 
+#: mmengine's loaders by prefix, as found by the first install.
+_MMENGINE_SCHEMES: dict = {}
+
+
 def install_checkpoint_loader() -> None:
     """Make mmengine load checkpoints of every scheme restrictedly.
 
@@ -128,10 +132,28 @@ def install_checkpoint_loader() -> None:
             'loader does not serve (projects/occ_common/fileio/'
             'checkpoint_schemes.py lists those of mmengine 0.10.7); add '
             'them there.')
+    if not _MMENGINE_SCHEMES and not is_installed():
+        _MMENGINE_SCHEMES.update(schemes)
     for prefix, loader in SCHEMES.items():
         if schemes.get(prefix) is not loader:
             CheckpointLoader.register_scheme(
                 prefixes=prefix, loader=loader, force=True)
+
+
+def uninstall_checkpoint_loader() -> None:
+    """Give mmengine back the loaders it had before the first install.
+
+    What a fresh process has: the fault matrix starts each case (a forked
+    child of a process that may have installed the restricted loader)
+    from it, so that a guard removed by a mutation is not hidden by an
+    install that happened earlier in the parent. No-op if nothing was
+    installed.
+    """
+    from mmengine.runner.checkpoint import CheckpointLoader
+    if not _MMENGINE_SCHEMES:
+        return
+    CheckpointLoader._schemes.clear()
+    CheckpointLoader._schemes.update(_MMENGINE_SCHEMES)
 
 
 def is_installed() -> bool:
@@ -141,4 +163,7 @@ def is_installed() -> bool:
                for prefix, loader in SCHEMES.items())
 
 
-__all__ = ['SCHEMES', 'install_checkpoint_loader', 'is_installed']
+__all__ = [
+    'SCHEMES', 'install_checkpoint_loader', 'is_installed',
+    'uninstall_checkpoint_loader'
+]

@@ -338,7 +338,13 @@ def test_importing_the_library_changes_nothing_global():
         'WeightsOnly = '
         'projects.occ_common.engine.hooks.WeightsOnlyCheckpointHook\n'
         'WeightsOnly().before_run(None)\n'
-        'assert is_installed() and "atomic_local" in backends\n')
+        'assert is_installed() and "atomic_local" in backends\n'
+        'from projects.occ_common.fileio.checkpoint_schemes import '
+        'uninstall_checkpoint_loader\n'
+        'uninstall_checkpoint_loader()\n'
+        'assert not is_installed()\n'
+        "assert CheckpointLoader._schemes[''].__module__ == "
+        "'mmengine.runner.checkpoint'\n")
     proc = subprocess.run([sys.executable, '-c', code],
                           cwd=ROOT,
                           capture_output=True,
