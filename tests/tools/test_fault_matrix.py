@@ -138,3 +138,13 @@ def test_an_earlier_install_does_not_hide_a_removed_guard():
     assert result['wrong'] == []
     seen = result['mutations']['init_model loads restricted']
     assert set(seen.values()) == {'unclear error'}, seen
+
+
+def test_a_rank_ended_by_its_deadline_is_read_under_pytest_capture():
+    """The rendezvous deadline ends a rank with os._exit from a thread; its
+    one line must reach the child's stderr file even where sys.stderr is
+    not file descriptor 2 (pytest's capture, a launcher's wrapper). Before,
+    this case read as an unclear error inside pytest and a clear one from
+    the command line."""
+    result = matrix.main(['--only', 'missing distributed peer'])
+    assert result['counts'] == {'clear error': 1}, result

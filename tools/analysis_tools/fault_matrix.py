@@ -36,6 +36,7 @@ import multiprocessing
 import os
 import os.path as osp
 import resource
+import sys
 import tempfile
 import time
 from typing import Dict, List, NamedTuple, Optional
@@ -76,6 +77,10 @@ def _child(case: Case, path: str, conn, folder: str,
         out = os.open(osp.join(folder, f'child.{name}'),
                       os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
         os.dup2(out, fd)
+    # Python-level writes to the files too (the parent's sys.stdout may be
+    # another object, e.g. pytest's capture).
+    sys.stdout = open(1, 'w', buffering=1, closefd=False)
+    sys.stderr = open(2, 'w', buffering=1, closefd=False)
     start = _resident_kb(os.getpid())
     # Each case starts as a fresh process would: without the restricted
     # loader that a test or case before it installed in the parent.

@@ -18,7 +18,6 @@ expected.
 """
 import contextlib
 import os
-import sys
 import threading
 from typing import Iterator, Optional
 
@@ -82,8 +81,9 @@ def rendezvous_deadline(timeout: Optional[float] = None) -> Iterator[None]:
 
     def watch():
         if not done.wait(timeout):
-            sys.stderr.write(f'error: {missing_peer_message(timeout)}\n')
-            sys.stderr.flush()
+            # To the descriptor itself: sys.stderr may be a wrapper that
+            # os._exit would not flush (a launcher's, pytest's capture).
+            os.write(2, f'error: {missing_peer_message(timeout)}\n'.encode())
             os._exit(1)  # the main thread is stuck inside torch's C++
 
     if timeout > 0:
