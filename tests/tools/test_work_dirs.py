@@ -179,14 +179,16 @@ def test_symlinked_pointer_target_is_not_written(tmp_path):
 
 @pytest.mark.slow
 def test_two_concurrent_runs_the_second_refuses(tmp_path):
-    """A real first run (a child process, 12 epochs) and a second one
+    """A real first run (a child process, 100 epochs) and a second one
     started while it trains: the second refuses; the first ends with exit
     0 and all its checkpoints (before: both exited 0, and the first run's
-    checkpoints were the second's)."""
+    checkpoints were the second's). 100 epochs, not 12: on a loaded
+    machine 12 ended before the second run had started, which then met
+    the finished run's checkpoints instead of its lock."""
     work = tmp_path / 'work'
     first = subprocess.Popen(
         [sys.executable, osp.join(REPO_ROOT, 'tools', 'train.py'), CONFIG,
-         '--work-dir', str(work), '--cfg-options', 'train_cfg.max_epochs=12',
+         '--work-dir', str(work), '--cfg-options', 'train_cfg.max_epochs=100',
          'train_cfg.val_interval=100'],
         cwd=REPO_ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
         text=True, env=dict(os.environ, CUDA_VISIBLE_DEVICES=''))
@@ -197,5 +199,5 @@ def test_two_concurrent_runs_the_second_refuses(tmp_path):
                        f'another run \\(pid {first.pid}'):
         _train(work, '--cfg-options', 'train_cfg.max_epochs=1')
     assert first.wait(timeout=300) == 0, first.stderr.read()[-3000:]
-    meta = load_checkpoint_file(str(work / 'epoch_12.pth'))['meta']
-    assert (meta['epoch'], meta['iter']) == (12, 48)
+    meta = load_checkpoint_file(str(work / 'epoch_100.pth'))['meta']
+    assert (meta['epoch'], meta['iter']) == (100, 400)
