@@ -31,8 +31,8 @@ from projects.occ_common.analysis.compile_check import (PHASES,
                                                         count_recompiles,
                                                         explain_breaks,
                                                         phase_call)
-from projects.occ_common.engine.config_checks import (cfg_errors_exit,
-                                                      merge_cfg_options)
+from projects.occ_common.apis import init_model
+from projects.occ_common.engine.config_checks import cfg_errors_exit
 from projects.occ_common.engine.hooks.torch_compile_hook import \
     mark_dynamic_points
 from projects.occ_common.synthetic.synthetic_batch import synthetic_batch
@@ -124,15 +124,10 @@ def format_result(result: Dict) -> str:
 
 def main(argv=None) -> Dict:
     args = parse_args(argv)
-    from mmdet3d.registry import MODELS
-    from mmengine.config import Config
-    from mmengine.registry import init_default_scope
-    with cfg_errors_exit():
-        cfg = Config.fromfile(args.config)
-        merge_cfg_options(cfg, args.cfg_options)
-    init_default_scope(cfg.get('default_scope', 'mmdet3d'))
     torch.manual_seed(0)
-    model = MODELS.build(cfg.model)
+    with cfg_errors_exit():
+        model = init_model(args.config, cfg_options=args.cfg_options)
+    cfg = model.cfg
     report = dict(config=args.config, num_points=args.num_points,
                   batch=args.batch, path='cpu' if args.cpu_path else
                   'compiled (GPU)', phases=[])
