@@ -179,25 +179,34 @@ def test_symlinked_pointer_target_is_not_written(tmp_path):
 
 @pytest.mark.slow
 def test_two_concurrent_runs_the_second_refuses(tmp_path):
-    """A real first run (a child process, 100 epochs) and a second one
-    started while it trains: the second refuses; the first ends with exit
-    0 and all its checkpoints (before: both exited 0, and the first run's
-    checkpoints were the second's). 100 epochs, not 12: on a loaded
-    machine 12 ended before the second run had started, which then met
-    the finished run's checkpoints instead of its lock."""
+    """A real first run (a child process) and a second one started while
+    it trains: the second refuses; the first ends with exit 0 and all its
+    checkpoints (before: both exited 0, and the first run's checkpoints
+    were the second's). The first run pauses before its 5th iteration
+    (epoch 2 of 2; epoch_1.pth written) until the test has tried the
+    second run, so it is mid-training however loaded the machine: with a
+    race instead (100 epochs), a loaded CI machine finished the first run
+    before the second started, which then met finished checkpoints."""
     work = tmp_path / 'work'
+    resume_file = tmp_path / 'second_run_tried'
     first = subprocess.Popen(
         [sys.executable, osp.join(REPO_ROOT, 'tools', 'train.py'), CONFIG,
-         '--work-dir', str(work), '--cfg-options', 'train_cfg.max_epochs=100',
-         'train_cfg.val_interval=100'],
+         '--work-dir', str(work), '--cfg-options', 'train_cfg.max_epochs=2',
+         'train_cfg.val_interval=2', 'model.pause_at_iter=5',
+         f'model.resume_file={resume_file}'],
         cwd=REPO_ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
         text=True, env=dict(os.environ, CUDA_VISIBLE_DEVICES=''))
-    deadline = time.time() + 120
-    while not osp.exists(work / 'epoch_1.pth') and time.time() < deadline:
-        time.sleep(0.2)
-    with pytest.raises(SystemExit, match=f'work dir {work} is in use by '
-                       f'another run \\(pid {first.pid}'):
-        _train(work, '--cfg-options', 'train_cfg.max_epochs=1')
+    try:
+        deadline = time.time() + 300
+        while not osp.exists(work / 'epoch_1.pth'):
+            assert first.poll() is None, first.stderr.read()[-3000:]
+            assert time.time() < deadline, 'no epoch_1.pth within 300 s'
+            time.sleep(0.2)
+        with pytest.raises(SystemExit, match=f'work dir {work} is in use by '
+                           f'another run \\(pid {first.pid}'):
+            _train(work, '--cfg-options', 'train_cfg.max_epochs=1')
+    finally:
+        resume_file.touch()
     assert first.wait(timeout=300) == 0, first.stderr.read()[-3000:]
-    meta = load_checkpoint_file(str(work / 'epoch_100.pth'))['meta']
-    assert (meta['epoch'], meta['iter']) == (100, 400)
+    meta = load_checkpoint_file(str(work / 'epoch_2.pth'))['meta']
+    assert (meta['epoch'], meta['iter']) == (2, 8)

@@ -5,6 +5,8 @@ resuming in seconds, independently of the real models. They are registered
 only when this module is imported (a test config lists it in
 ``custom_imports``), never by ``import projects.occ_common``.
 """
+import os
+import time
 from typing import List, Optional, Sequence, Tuple, Union
 
 import numpy as np
@@ -123,7 +125,17 @@ class ToyOccupancyModel(BaseModel):
             training: random draws from torch's global generator, as
             DropPath's, to test that a resume repeats them. Defaults to 0
             (no dropout, nothing drawn).
+        pause_at_iter (int, optional): Before this training iteration
+            (counted as ``nan_at_iter``), wait until ``resume_file``
+            exists, so that a test can act while a real run is known to
+            be mid-training, however loaded the machine. Defaults to None
+            (never).
+        resume_file (str, optional): The file ``pause_at_iter`` waits
+            for. Defaults to None.
     """
+
+    #: Seconds a paused run waits for its ``resume_file`` before it fails.
+    PAUSE_TIMEOUT = 600
 
     def __init__(self,
                  in_channels: int = 3,
@@ -132,14 +144,31 @@ class ToyOccupancyModel(BaseModel):
                  init_cfg: Optional[dict] = None,
                  nan_at_iter: Optional[int] = None,
                  explode_at_iter: Optional[int] = None,
-                 dropout: float = 0.) -> None:
+                 dropout: float = 0.,
+                 pause_at_iter: Optional[int] = None,
+                 resume_file: Optional[str] = None) -> None:
         super().__init__(
             data_preprocessor=data_preprocessor, init_cfg=init_cfg)
         self.dropout = nn.Dropout3d(dropout) if dropout > 0 else None
         self.classifier = nn.Conv3d(in_channels, num_classes, 1)
         self.nan_at_iter = nan_at_iter
         self.explode_at_iter = explode_at_iter
+        if pause_at_iter is not None and resume_file is None:
+            raise ValueError('pause_at_iter needs a resume_file to wait for')
+        self.pause_at_iter = pause_at_iter
+        self.resume_file = resume_file
         self._loss_calls = 0
+
+    def _pause(self) -> None:
+        """Wait for ``resume_file``; TimeoutError after PAUSE_TIMEOUT s."""
+        deadline = time.monotonic() + self.PAUSE_TIMEOUT
+        while not os.path.exists(self.resume_file):
+            if time.monotonic() > deadline:
+                raise TimeoutError(
+                    f'{self.resume_file} did not appear within '
+                    f'{self.PAUSE_TIMEOUT} s of the pause at training '
+                    f'iteration {self.pause_at_iter}')
+            time.sleep(0.1)
 
     def forward(self,
                 inputs: Union[Tensor, Sequence[Tensor]],
@@ -162,6 +191,8 @@ class ToyOccupancyModel(BaseModel):
         if mode == 'tensor':
             return logits
         if mode == 'loss':
+            if self._loss_calls + 1 == self.pause_at_iter:
+                self._pause()
             gt = torch.stack([s.gt_occ for s in data_samples])
             loss = _cross_entropy(logits, gt.to(logits.device))
             self._loss_calls += 1
