@@ -34,8 +34,6 @@ from .verdict import CheckResult, CheckSummary, summarise, worst
 #: The check families, in the report's order.
 CHECKS = ('calibration', 'labels_vs_lidar', 'label_grid', 'masks',
           'sequence', 'class_histogram')
-#: What a split-level result is called in the per-sample lists.
-SPLIT = '(split)'
 
 
 @dataclass
@@ -163,8 +161,6 @@ def run_doctor(cfg,
         per_sample = [r[check] for r in report.results if check in r]
         tokens = [t for t, r in zip(report.tokens, report.results)
                   if check in r]
-        if check in split_results:
-            per_sample.append(split_results[check])
-            tokens.append(SPLIT)
-        report.summaries[check] = summarise(check, per_sample, tokens)
+        report.summaries[check] = summarise(check, per_sample, tokens,
+                                            split_results.get(check))
     return report

@@ -2,8 +2,9 @@
 script.
 
 The markdown opens with the verdict and one row per check family (its
-verdict, how many samples passed, warned, failed or were skipped, and its
-headline numbers), then lists the findings (the failures first, each
+verdict, how many samples passed, warned, failed or were skipped, the
+verdict over the whole split where the family has one, and its headline
+numbers), then lists the findings (the failures first, each
 naming its sample), the pictures, and per family every number's mean,
 minimum and maximum over the checked samples. The JSON holds the same and
 every sample's own numbers.
@@ -83,6 +84,8 @@ def _markdown(report: DoctorReport) -> str:
     for check in CHECKS:
         summary = report.summaries[check]
         counts = ' / '.join(str(summary.counts[v]) for v in VERDICTS)
+        if summary.split_verdict is not None:
+            counts += f'; split: {summary.split_verdict}'
         lines.append(f'| {check} | **{summary.verdict}** | {counts} | '
                      f'{headline(summary)} |')
     lines += ['', '## Findings', '']
@@ -141,6 +144,7 @@ def _as_json(report: DoctorReport) -> Dict:
         verdict=report.verdict, pictures=report.pictures,
         checks={
             check: dict(verdict=s.verdict, counts=s.counts,
+                        split_verdict=s.split_verdict,
                         numbers=s.numbers,
                         findings=[dict(verdict=v, sample=t, text=x)
                                   for v, t, x in s.findings])

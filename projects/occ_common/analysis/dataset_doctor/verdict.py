@@ -12,13 +12,15 @@ one check into the split's verdict and the numbers' mean, minimum and
 maximum.
 """
 from dataclasses import dataclass, field
-from typing import Dict, Iterable, List, Sequence
+from typing import Dict, Iterable, List, Optional, Sequence
 
 import numpy as np
 
 PASS, WARN, FAIL, SKIP = 'pass', 'warn', 'fail', 'skip'
 #: Verdicts from the best to the worst; a missing check ranks lowest.
 VERDICTS = (SKIP, PASS, WARN, FAIL)
+#: The sample name of a check's result over the whole split.
+SPLIT = '(split)'
 _RANK = {verdict: rank for rank, verdict in enumerate(VERDICTS)}
 
 
@@ -89,39 +91,55 @@ class CheckSummary:
 
     Args:
         check (str): The check's family.
-        verdict (str): The worst verdict of its samples (and of its
-            split-level result, if any).
-        counts (dict[str, int]): Samples per verdict.
+        verdict (str): The worst verdict of its samples and of its
+            split-level result, if any.
+        counts (dict[str, int]): Checked samples per verdict (the
+            split-level result is not a sample: it is ``split_verdict``).
         numbers (dict[str, dict[str, float]]): Per number: ``mean``,
-            ``min``, ``max`` over the samples that measured it.
+            ``min``, ``max`` over the results that measured it (a
+            split-level number has one value).
         findings (list[tuple[str, str, str]]): ``(verdict, sample,
-            sentence)``, failures first.
+            sentence)``, failures first; the split-level result's sample
+            is :data:`SPLIT`.
+        split_verdict (str, optional): The verdict of the check's
+            split-level result; None where it has none.
     """
     check: str
     verdict: str
     counts: Dict[str, int]
     numbers: Dict[str, Dict[str, float]]
     findings: List[tuple]
+    split_verdict: Optional[str] = None
 
 
-def summarise(check: str, results: Sequence[CheckResult],
-              samples: Sequence[str]) -> CheckSummary:
+def summarise(check: str,
+              results: Sequence[CheckResult],
+              samples: Sequence[str],
+              split_result: Optional[CheckResult] = None) -> CheckSummary:
     """Fold the per-sample results of one check.
 
     Args:
         check (str): The check's family.
-        results (Sequence[CheckResult]): One per sample (and possibly one
-            for the split, named ``'(split)'`` in ``samples``).
+        results (Sequence[CheckResult]): One per checked sample.
         samples (Sequence[str]): The sample (token) of each result.
+        split_result (CheckResult, optional): The check's result over the
+            whole split (the class histogram's, the label grid's): it
+            counts in the verdict, numbers and findings, not as a sample.
+            Defaults to None.
 
     Returns:
         CheckSummary: The summary; its numbers are finite values only.
     """
     counts = {verdict: 0 for verdict in VERDICTS}
+    for result in results:
+        counts[result.verdict] += 1
+    results, samples = list(results), list(samples)
+    if split_result is not None:
+        results.append(split_result)
+        samples.append(SPLIT)
     values: Dict[str, list] = {}
     findings = []
     for result, sample in zip(results, samples):
-        counts[result.verdict] += 1
         for key, value in result.numbers.items():
             if value is not None and np.isfinite(value):
                 values.setdefault(key, []).append(float(value))
@@ -133,5 +151,6 @@ def summarise(check: str, results: Sequence[CheckResult],
                   max=float(np.max(v)))
         for key, v in values.items()
     }
-    return CheckSummary(check, worst(r.verdict for r in results), counts,
-                        numbers, findings)
+    return CheckSummary(
+        check, worst(r.verdict for r in results), counts, numbers, findings,
+        None if split_result is None else split_result.verdict)

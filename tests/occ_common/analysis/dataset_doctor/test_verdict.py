@@ -2,7 +2,8 @@
 import math
 
 from projects.occ_common.analysis.dataset_doctor.verdict import (FAIL, PASS,
-                                                                 SKIP, WARN,
+                                                                 SKIP, SPLIT,
+                                                                 WARN,
                                                                  CheckResult,
                                                                  summarise,
                                                                  worst)
@@ -51,3 +52,21 @@ def test_summarise_counts_and_folds_numbers():
     assert summary.counts == {SKIP: 1, PASS: 0, WARN: 1, FAIL: 1}
     assert summary.numbers == dict(hit=dict(mean=0.9, min=0.8, max=1.0))
     assert summary.findings == [(FAIL, 'b', 'shifted'), (WARN, 'a', 'low')]
+
+
+def test_split_result_is_a_verdict_not_a_sample():
+    """Two checked samples pass and the split-level histogram fails: the
+    counts say 2 samples passed (the old fold said 3 samples, one of them
+    the split, failed 1), the verdict is the split's failure, and its
+    finding names the split."""
+    samples = [CheckResult('class_histogram', numbers=dict(empty_share=0.9)),
+               CheckResult('class_histogram', numbers=dict(empty_share=0.7))]
+    split = CheckResult('class_histogram', numbers=dict(distance=0.4))
+    split.fail('far from the reference')
+    summary = summarise('class_histogram', samples, ['a', 'b'], split)
+    assert summary.counts == {SKIP: 0, PASS: 2, WARN: 0, FAIL: 0}
+    assert (summary.verdict, summary.split_verdict) == (FAIL, FAIL)
+    assert summary.findings == [(FAIL, SPLIT, 'far from the reference')]
+    assert summary.numbers['distance'] == dict(mean=0.4, min=0.4, max=0.4)
+    assert summary.numbers['empty_share']['mean'] == 0.8
+    assert summarise('masks', samples, ['a', 'b']).split_verdict is None
