@@ -78,12 +78,17 @@ def device_frustum(img_shape: Sequence[int], feat_shape: Sequence[int],
     The frustum depends only on the sizes and the bins, so a model that
     lifts every batch need not rebuild it on the host and copy it to the
     GPU each time (a host-to-device copy per call). The tensor is shared
-    between callers: read it, never write it.
+    between callers: read it, never write it. Under ``torch.compile`` the
+    cache is bypassed: the frustum is built in the graph, where inductor
+    folds it into a constant (Dynamo would otherwise trace through the
+    cache anyway, with a warning per compiled model).
 
     Returns:
         Tensor: float32. Shape (D, h, w, 3).
     """
-    return _device_frustum(
+    build = (_device_frustum.__wrapped__
+             if torch.compiler.is_compiling() else _device_frustum)
+    return build(
         tuple(int(v) for v in img_shape), tuple(int(v) for v in feat_shape),
         normalize_depth_bound(depth_bound), torch.device(device))
 

@@ -1,5 +1,6 @@
 """Tests of the frustum, projection and position-embedding helpers."""
 import math
+import warnings
 
 import pytest
 import torch
@@ -126,3 +127,30 @@ def test_camera_parameter_vector():
     ],
                             dtype=torch.float64)
     torch.testing.assert_close(vec[0, 0], expected, atol=1e-12, rtol=0)
+
+
+def test_device_frustum_under_compile_skips_the_cache():
+    """Compiled (eager backend, one graph), ``device_frustum`` gives the
+    frustum's values without Dynamo's warning "Dynamo detected a call to a
+    `functools.lru_cache`-wrapped function", which it gave for every
+    compiled camera model (Dynamo warns once per process: its record of
+    given warnings is cleared first). Eager calls still share one
+    tensor."""
+    from torch._dynamo import utils as dynamo_utils
+
+    from projects.occ_common.models.layers.camera_geometry import \
+        device_frustum
+
+    def lift(x):
+        return x + device_frustum((4, 8), (2, 4), (2.0, 6.0, 2.0), 'cpu')
+
+    torch._dynamo.reset()
+    dynamo_utils.warn_once_cache.clear()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter('always')
+        out = torch.compile(lift, backend='eager', fullgraph=True)(
+            torch.zeros(()))
+    assert not [w for w in caught if 'lru_cache' in str(w.message)]
+    assert torch.equal(out, create_frustum((4, 8), (2, 4), (2.0, 6.0, 2.0)))
+    assert device_frustum((4, 8), (2, 4), (2.0, 6.0, 2.0), 'cpu') is \
+        device_frustum((4, 8), (2, 4), (2.0, 6.0, 2.0), 'cpu')
