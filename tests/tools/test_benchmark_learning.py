@@ -183,6 +183,59 @@ def test_bench_run_writes_row_and_reuses_it(tmp_path, capsys):
         tool.bench_run('toy', CONFIG, [], args, None, str(tmp_path), log)
 
 
+@pytest.mark.slow
+def test_extend_continues_a_time_stopped_run(tmp_path, capsys):
+    """A 4-iteration run stopped after iteration 1 by a 60 ns CPU budget;
+    with --extend and no budget it trains on to iteration 4 (validations
+    at 0, 1 (the stop), 2 and 4) and the stopped row stays as
+    result-1it.json. Before, the new budget was refused as "other
+    settings". Another --iters is still refused, and so is extending a run
+    that ended its schedule."""
+    tool = _tool()
+    args = SimpleNamespace(iters=4, val_interval=2, max_minutes=None,
+                           max_cpu_minutes=1e-9, log_interval=1, pictures=0,
+                           val_scenes=1, samples=4, extend=False)
+    log = str(tmp_path / 'log.txt')
+    stopped = tool.bench_run('toy', CONFIG, [], args, None, str(tmp_path),
+                             log)
+    assert (stopped['iterations'], stopped['stopped_by_time']) == (1, True)
+    args.max_cpu_minutes = None
+    with pytest.raises(SystemExit, match='other settings'):
+        tool.bench_run('toy', CONFIG, [], args, None, str(tmp_path), log)
+    args.extend, args.iters = True, 8
+    with pytest.raises(SystemExit, match='larger --max-minutes'):
+        tool.bench_run('toy', CONFIG, [], args, None, str(tmp_path), log)
+    args.iters = 4
+    row = tool.bench_run('toy', CONFIG, [], args, None, str(tmp_path), log)
+    assert 'kept as result-1it.json' in capsys.readouterr().out
+    assert (row['iterations'], row['stopped_by_time']) == (4, False)
+    assert [s for s, _ in row['curves']['val']] == [0, 1, 2, 4]
+    with open(tmp_path / 'runs' / 'toy' / 'result-1it.json') as f:
+        assert json.load(f)['iterations'] == 1
+    assert 'max_cpu_minutes' not in row['settings']  # no budget now
+
+
+def test_extend_takes_only_larger_budgets_of_time_stopped_runs(tmp_path):
+    """Budgets may grow (1 -> 2 CPU-min) or go (1 -> none); a smaller one
+    (2 -> 1), a new one on an unlimited run (none -> 1) or any other
+    setting (iters 4 -> 8) is not an extension. A run that ended its
+    schedule is refused and its result stays where it was."""
+    grows = _tool()._budget_grows
+    base = dict(config='c', iters=4, max_minutes=None)
+    assert grows(dict(base, max_cpu_minutes=1), dict(base, max_cpu_minutes=2))
+    assert grows(dict(base, max_cpu_minutes=1), base)
+    assert not grows(dict(base, max_cpu_minutes=2),
+                     dict(base, max_cpu_minutes=1))
+    assert not grows(base, dict(base, max_cpu_minutes=1))
+    assert not grows(dict(base, max_cpu_minutes=1),
+                     dict(base, iters=8, max_cpu_minutes=2))
+    result = tmp_path / 'result.json'
+    result.write_text(json.dumps(dict(iterations=4, stopped_by_time=False)))
+    with pytest.raises(SystemExit, match=r'whole schedule \(4 iterations'):
+        _tool()._keep_stopped_result(str(tmp_path))
+    assert result.is_file()
+
+
 def test_world_with_other_parameters_is_refused(tmp_path):
     """A synthetic world of 3 scenes is not silently reused for 10."""
     meta = tmp_path / 'synthetic_gt' / 'meta.json'

@@ -24,7 +24,9 @@ held-out ones, and draw their learning curves.
    every finished run in ``--out``.
 
 It resumes: a killed run continues from its last checkpoint, and a finished
-run (``runs/<name>/result.json`` with the same settings) is reused. Nothing
+run (``runs/<name>/result.json`` with the same settings) is reused; with
+``--extend`` a run that its time budget stopped continues under a larger
+one, where its learning-rate schedule left off. Nothing
 here is CPU-specific: the Runner trains on a GPU when there is one.
 Training happens in a child process (``--train-one``) so that every run
 gets a fresh Runner, logger and registry state.
@@ -223,6 +225,12 @@ def parse_args(argv=None):
         '--retest', action='store_true',
         help='test the last checkpoint of finished runs again (e.g. after '
         'a change of the metric) instead of reusing their results')
+    parser.add_argument(
+        '--extend', action='store_true',
+        help='continue runs that their time budget stopped, with the '
+        '--max-minutes / --max-cpu-minutes given now (larger, or none); '
+        'every other setting must be the run\'s own. The stopped run\'s '
+        'result is kept as result-<iterations>it.json')
     parser.add_argument(
         '--train-one', metavar='SPEC_JSON', help=argparse.SUPPRESS)
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -523,12 +531,47 @@ def _last_checkpoint(work_dir: str) -> str:
         return f.read().strip()
 
 
+#: The settings a run extended with ``--extend`` may change.
+BUDGETS = ('max_minutes', 'max_cpu_minutes')
+
+
+def _budget_grows(old: dict, new: dict) -> bool:
+    """Whether ``new`` is ``old`` with only larger (or no) time budgets."""
+    if ({k: v for k, v in old.items() if k not in BUDGETS} !=
+            {k: v for k, v in new.items() if k not in BUDGETS}):
+        return False
+    for key in BUDGETS:
+        before, after = old.get(key), new.get(key)
+        if before is None and after is not None:
+            return False  # an unlimited run gets no limit afterwards
+        if None not in (before, after) and after <= before:
+            return False
+    return True
+
+
+def _keep_stopped_result(run_dir: str) -> str:
+    """Move a time-stopped run's ``result.json`` aside for ``--extend``;
+    its new name. A run that ended its schedule cannot be extended."""
+    result = _load_json(osp.join(run_dir, RESULT))
+    if not result.get('stopped_by_time'):
+        raise SystemExit(
+            f'{run_dir} ran its whole schedule ({result["iterations"]} '
+            'iterations): --extend continues only a run that its time '
+            'budget stopped; give --iters for a longer schedule in another '
+            'run (--suffix).')
+    kept = f'result-{result["iterations"]}it.json'
+    os.replace(osp.join(run_dir, RESULT), osp.join(run_dir, kept))
+    return kept
+
+
 def bench_run(name: str, config: str, options: List[str], args,
               data_root: Optional[str], out: str, log_path: str) -> dict:
     """Train (or resume, or reuse) one run and evaluate it.
 
     A finished run is reused as it is, or with ``args.retest`` its last
-    checkpoint is tested again and its row rewritten.
+    checkpoint is tested again and its row rewritten. With ``args.extend``
+    a run whose settings differ only by larger time budgets continues
+    (see :func:`_budget_grows`).
 
     Returns:
         dict: The run's row: ``name``, ``config``, ``labels``,
@@ -546,15 +589,27 @@ def bench_run(name: str, config: str, options: List[str], args,
     if max_cpu_minutes is not None:
         # Only when set: run folders made before the option stay reusable.
         settings['max_cpu_minutes'] = max_cpu_minutes
+    extend = getattr(args, 'extend', False)
+    extended = False
     for path in (osp.join(run_dir, RESULT), osp.join(run_dir, SETTINGS)):
         if osp.isfile(path):
             old = _load_json(path)
             old = old.get('settings', old)
-            if old != settings:
+            if old == settings:
+                continue
+            if not (extend and _budget_grows(old, settings)):
                 raise SystemExit(
                     f'{run_dir} was made with other settings ({old} != '
-                    f'{settings}); remove it or use another --suffix.')
+                    f'{settings}); remove it or use another --suffix'
+                    + ('' if not extend else ' (--extend changes only a '
+                       'larger --max-minutes / --max-cpu-minutes)') + '.')
+            extended = True
     finished = osp.isfile(osp.join(run_dir, RESULT))
+    if finished and extended:
+        kept = _keep_stopped_result(run_dir)
+        print(f'\n{name}: extending the run its time budget stopped '
+              f'(its result kept as {kept})')
+        finished = False
     if finished and not getattr(args, 'retest', False):
         print(f'\n{name}: finished earlier, reusing {run_dir}/{RESULT}')
         return _load_json(osp.join(run_dir, RESULT))
