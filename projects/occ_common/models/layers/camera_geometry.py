@@ -79,9 +79,8 @@ def device_frustum(img_shape: Sequence[int], feat_shape: Sequence[int],
     lifts every batch need not rebuild it on the host and copy it to the
     GPU each time (a host-to-device copy per call). The tensor is shared
     between callers: read it, never write it. Under ``torch.compile`` the
-    cache is bypassed: the frustum is built in the graph, where inductor
-    folds it into a constant (Dynamo would otherwise trace through the
-    cache anyway, with a warning per compiled model).
+    cache is bypassed and the frustum is built in the graph: Dynamo traced
+    through the cache anyway, with a warning per compiled model.
 
     Returns:
         Tensor: float32. Shape (D, h, w, 3).
